@@ -1,0 +1,82 @@
+"""The one gate to Mitsuba 3 / Dr.Jit: pick a libLLVM that works, then a variant.
+
+Mitsuba's LLVM back end needs libLLVM >= 16; with 14 or 15 alone it *aborts the process*
+("Cannot select ... fmaximum") on the first kernel using max/min. Dr.Jit reads the library
+path from ``DRJIT_LIBLLVM_PATH`` when it is imported, so this module must run before any
+``import drjit``. Without a usable libLLVM we fall back to ``scalar_rgb`` with one warning.
+Modules that render import Mitsuba through :func:`mitsuba` and nowhere else.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import warnings
+
+MIN_LLVM = 16
+_LIB_GLOBS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
+    "/usr/local/opt/llvm/lib/libLLVM*.dylib",
+)
+_state: dict = {}
+
+
+def llvm_version(path: str) -> int | None:
+    """Major version from a libLLVM file name (libLLVM-19.so, libLLVM.so.19.1, libLLVM-15.so.1)."""
+    name = os.path.basename(path)
+    m = re.match(r"libLLVM-(\d+)", name) or re.match(r"libLLVM\.(?:so|dylib)\.(\d+)", name)
+    if m is None and "/llvm-" in path:
+        m = re.search(r"/llvm-(\d+)/", path)
+    return int(m.group(1)) if m else None
+
+
+def find_libllvm() -> str | None:
+    """Path of the newest libLLVM >= 16 on this machine, or None."""
+    found: list[tuple[int, str]] = []
+    for pattern in _LIB_GLOBS:
+        for path in glob.glob(pattern):
+            v = llvm_version(path)
+            if v is not None and v >= MIN_LLVM and os.path.isfile(path):
+                found.append((v, path))
+    return max(found)[1] if found else None
+
+
+def choose_variant(preferred: str = "llvm_ad_rgb") -> str:
+    """Point Dr.Jit at a usable libLLVM and return the variant to use (decided once)."""
+    if "variant" in _state:
+        return _state["variant"]
+    variant = preferred
+    if preferred.startswith("llvm"):
+        current = os.environ.get("DRJIT_LIBLLVM_PATH")
+        if current and (llvm_version(current) or MIN_LLVM) < MIN_LLVM:
+            current = None  # a known-bad choice would abort the process: look for a better one
+        path = current or find_libllvm()
+        if path is None:
+            variant = "scalar_rgb"
+            warnings.warn(
+                "brdffit: no libLLVM >= 16 found (Mitsuba's LLVM back end aborts with 14/15); "
+                "rendering with the slow scalar_rgb variant. Install libllvm19 (Debian) or set "
+                "DRJIT_LIBLLVM_PATH to a newer libLLVM.",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+        else:
+            os.environ["DRJIT_LIBLLVM_PATH"] = path
+    _state["variant"] = variant
+    return variant
+
+
+def mitsuba(preferred: str = "llvm_ad_rgb"):
+    """Import Mitsuba with a safe variant set, and return the module."""
+    variant = choose_variant(preferred)
+    import mitsuba as mi  # noqa: PLC0415 - Mitsuba is imported only where it is needed
+
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    return mi

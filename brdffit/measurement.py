@@ -1,0 +1,140 @@
+"""`Measurement`: the one in-memory form of every reflectance source (SPEC 2).
+
+Samples are (wi, wo) pairs in the local shading frame (SPEC 1) with a BRDF value per channel,
+in 1/sr, without the cosine foreshortening. ``weights`` 0 marks an invalid sample (kept so that
+a UBO table keeps its 81 x 81 shape).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .grid import UBO_SIZE
+
+
+def _as_float_array(x) -> Array:
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+def _freeze(extra) -> tuple[tuple[str, Any], ...]:
+    if extra is None:
+        return ()
+    items = extra.items() if isinstance(extra, dict) else extra
+    return tuple(sorted((str(k), v) for k, v in items))
+
+
+class Measurement(eqx.Module):
+    """Tabulated or scattered BRDF samples.
+
+    ``Measurement(wi=..., wo=..., values=...)`` with optional ``weights`` (default 1) and metadata.
+    It is immutable and a JAX pytree: the arrays are leaves, the metadata is static.
+    """
+
+    wi: Float[Array, "N 3"] = eqx.field(converter=_as_float_array)
+    wo: Float[Array, "N 3"] = eqx.field(converter=_as_float_array)
+    values: Float[Array, "N C"] = eqx.field(converter=_as_float_array)
+    weights: Float[Array, " N"] = eqx.field(converter=_as_float_array, default=None)
+    name: str = eqx.field(static=True, default="measurement")
+    source: str = eqx.field(static=True, default="")
+    grid: str | None = eqx.field(static=True, default=None)
+    colour_space: str = eqx.field(static=True, default="linear_rec709")
+    units: str = eqx.field(static=True, default="1/sr")
+    #: Further metadata as sorted (key, value) pairs, e.g. the reader's options; see ``.meta``.
+    extra: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=(), converter=_freeze)
+
+    def __init__(
+        self,
+        wi,
+        wo,
+        values,
+        weights=None,
+        *,
+        name: str = "measurement",
+        source: str = "",
+        grid: str | None = None,
+        colour_space: str = "linear_rec709",
+        units: str = "1/sr",
+        extra=None,
+    ):
+        values = jnp.asarray(values)
+        if values.ndim == 1:
+            values = values[:, None]
+        self.wi = wi
+        self.wo = wo
+        self.values = values
+        self.weights = jnp.ones(values.shape[0]) if weights is None else weights
+        self.name = name
+        self.source = source
+        self.grid = grid
+        self.colour_space = colour_space
+        self.units = units
+        self.extra = extra
+
+    def __check_init__(self):
+        n = self.values.shape[0]
+        if self.wi.shape != (n, 3) or self.wo.shape != (n, 3):
+            raise ValueError(
+                f"wi {self.wi.shape} and wo {self.wo.shape} must be ({n}, 3) to match values {self.values.shape}"
+            )
+        if self.weights.shape != (n,):
+            raise ValueError(f"weights {self.weights.shape} must be ({n},)")
+        if self.grid == "ubo81" and n != UBO_SIZE * UBO_SIZE:
+            raise ValueError(f"a ubo81 measurement has {UBO_SIZE * UBO_SIZE} samples, not {n}")
+
+    # -- convenience -----------------------------------------------------------------------------
+    @property
+    def n_samples(self) -> int:
+        return int(self.values.shape[0])
+
+    @property
+    def n_channels(self) -> int:
+        return int(self.values.shape[1])
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """All metadata as one dict (the named fields plus ``extra``)."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "grid": self.grid,
+            "colour_space": self.colour_space,
+            "units": self.units,
+            **dict(self.extra),
+        }
+
+    def valid_mask(self) -> np.ndarray:
+        """Samples a fit may use: weight > 0, finite values, both directions above the horizon."""
+        values = np.asarray(self.values)
+        return (
+            (np.asarray(self.weights) > 0)
+            & np.all(np.isfinite(values), axis=1)
+            & (np.asarray(self.wi)[:, 2] > 0)
+            & (np.asarray(self.wo)[:, 2] > 0)
+        )
+
+    def table(self) -> Float[np.ndarray, "81 81 C"]:
+        """The (light, view, channel) table of a UBO-81 measurement."""
+        if self.grid != "ubo81":
+            raise ValueError(f"{self.name}: .table() needs a ubo81 measurement, this one has grid={self.grid!r}")
+        return np.asarray(self.values).reshape(UBO_SIZE, UBO_SIZE, self.n_channels)
+
+    def replace(self, **changes) -> "Measurement":
+        """A copy with some fields changed."""
+        fields = dict(
+            wi=self.wi, wo=self.wo, values=self.values, weights=self.weights, name=self.name,
+            source=self.source, grid=self.grid, colour_space=self.colour_space, units=self.units,
+            extra=dict(self.extra),
+        )
+        fields.update(changes)
+        return Measurement(**fields)
+
+    def __repr__(self) -> str:
+        return (
+            f"Measurement(name={self.name!r}, samples={self.n_samples}, channels={self.n_channels}, "
+            f"grid={self.grid!r}, source={self.source!r})"
+        )

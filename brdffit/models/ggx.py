@@ -1,0 +1,65 @@
+"""GGX (Trowbridge-Reitz) microfacet BRDF with a Lambertian base.
+
+B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refraction through Rough
+Surfaces", EGSR 2007. T. S. Trowbridge, K. P. Reitz, JOSA 65(5), 1975. C. Schlick, "An Inexpensive
+BRDF Model for Physically-based Rendering", CGF 13(3), 1994.
+
+f_r = kd/pi + ks F(h.l) G(l, v) D(h) / (4 (n.l)(n.v))
+
+D(h) = alpha^2 / (pi (cos^2 th_h alpha^2 + sin^2 th_h)^2)    (the usual form, rearranged so that
+                                                              it stays exact at alpha = 1e-4)
+G    = G1(l) G1(v),  G1(w) = 2 / (1 + sqrt(1 + alpha^2 tan^2 th_w))    (separable Smith)
+F    = f0 + (1 - f0)(1 - h.l)^5                                   (Schlick)
+
+With kd = 0, ks = 1, f0 = 1 this is Mitsuba 3's ``roughconductor`` (distribution ggx, material
+none, sample_visible irrelevant for eval) divided by cos(theta_o).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from . import _math as m
+from .base import Model, Param
+
+PARAMS = (
+    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
+    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular scale"),
+    Param("alpha", 1, 1e-4, 1.0, 0.2, "roughness", doc="GGX roughness (= Mitsuba alpha)"),
+    Param("f0", 1, 0.0, 1.0, 0.04, "fresnel", doc="Schlick reflectance at normal incidence"),
+)
+
+
+def ggx_ndf(h, alpha):
+    """Trowbridge-Reitz D(h) for a unit half vector h, (N, 1)."""
+    sin2, cos2 = m.sin2_cos2_theta(h)
+    a2 = alpha * alpha
+    return a2 / (jnp.pi * (cos2 * a2 + sin2) ** 2)
+
+
+def smith_g1(w, alpha):
+    """Separable Smith masking for GGX, (N, 1)."""
+    return 2.0 / (1.0 + jnp.sqrt(1.0 + alpha * alpha * m.tan2_theta(w)))
+
+
+def specular_lobe(p, wi, wo):
+    """ks F G D / (4 (n.l)(n.v)) without the diffuse term, (N, C)."""
+    h = m.half_vector(wi, wo)
+    alpha = p["alpha"]
+    d = ggx_ndf(h, alpha)
+    g = smith_g1(wi, alpha) * smith_g1(wo, alpha)
+    f = m.schlick_fresnel(p["f0"], jnp.sum(h * wi, axis=-1, keepdims=True))
+    return p["ks"] * f * g * d / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
+
+
+def formula(p, wi, wo):
+    return p["kd"] / jnp.pi + specular_lobe(p, wi, wo)
+
+
+MODEL = Model(
+    name="ggx",
+    params=PARAMS,
+    formula=formula,
+    citation="Walter, Marschner, Li, Torrance: Microfacet Models for Refraction through Rough Surfaces, EGSR 2007",
+    reciprocal=True,
+)

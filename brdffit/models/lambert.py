@@ -1,0 +1,30 @@
+"""Lambert: the ideal diffuse reflector.
+
+J. H. Lambert, *Photometria*, 1760.
+
+Lecture form: I_d = I_L k_d (n . l). As a BRDF the cosine belongs to the rendering equation, not to
+f_r, and energy conservation fixes the 1/pi: f_r = k_d / pi, whose directional albedo is k_d.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .base import Model, Param
+
+PARAMS = (
+    Param("kd", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="diffuse albedo"),
+)
+
+
+def formula(p, wi, wo):
+    return jnp.broadcast_to(p["kd"] / jnp.pi, (wi.shape[0], p["kd"].shape[0]))
+
+
+MODEL = Model(
+    name="lambert",
+    params=PARAMS,
+    formula=formula,
+    citation="J. H. Lambert, Photometria, 1760",
+    reciprocal=True,
+)

@@ -1,0 +1,49 @@
+"""Shared fixtures. Real measurements come from ../shared/data or $BRDFFIT_DATA; tests that need
+them skip with a reason when they are absent."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def data_dir() -> Path | None:
+    env = os.environ.get("BRDFFIT_DATA")
+    candidates = [Path(env)] if env else []
+    candidates.append(REPO.parent / "shared" / "data")
+    for c in candidates:
+        if (c / "measured").is_dir():
+            return c
+    return None
+
+
+def _files(sub: str, pattern: str) -> list[Path]:
+    d = data_dir()
+    return sorted((d / "measured" / sub).glob(pattern)) if d else []
+
+
+RGL_FILES = _files("rgl", "*.bsdf")
+CORNELL_FILES = _files("cornell", "*.brdf")
+NO_DATA = "real measurements not found: set BRDFFIT_DATA or place them in ../shared/data"
+
+
+def rgl_params():
+    return [pytest.param(p, id=p.stem) for p in RGL_FILES] or [pytest.param(None, marks=pytest.mark.skip(reason=NO_DATA))]
+
+
+def cornell_params():
+    return [pytest.param(p, id=p.stem) for p in CORNELL_FILES] or [
+        pytest.param(None, marks=pytest.mark.skip(reason=NO_DATA))
+    ]
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    d = data_dir()
+    if d is None:
+        pytest.skip(NO_DATA)
+    return d
