@@ -36,10 +36,17 @@ def llvm_version(path: str) -> int | None:
     return int(m.group(1)) if m else None
 
 
+def _search_globs() -> tuple[str, ...]:
+    # BRDFFIT_LLVM_GLOBS (os.pathsep-separated glob patterns) replaces the default search: tests use
+    # it to play a machine that has only libLLVM 14/15.
+    env = os.environ.get("BRDFFIT_LLVM_GLOBS")
+    return tuple(env.split(os.pathsep)) if env else _LIB_GLOBS
+
+
 def find_libllvm() -> str | None:
     """Path of the newest libLLVM >= 16 on this machine, or None."""
     found: list[tuple[int, str]] = []
-    for pattern in _LIB_GLOBS:
+    for pattern in _search_globs():
         for path in glob.glob(pattern):
             v = llvm_version(path)
             if v is not None and v >= MIN_LLVM and os.path.isfile(path):
