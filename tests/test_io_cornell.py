@@ -1,0 +1,69 @@
+"""Cornell / pbrt-v2 .brdf reader: 1439 samples, finite non-negative RGB, peak at grazing mirror."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.errors import InputError
+from brdffit.grid import cartesian_to_spherical
+from brdffit.io.cornell import spectral_to_rgb_matrix
+from conftest import cornell_params
+
+WL = tuple(float(w) for w in range(400, 701, 10))
+
+
+@pytest.mark.parametrize("path", cornell_params())
+def test_cornell_real_files(path):
+    m = brdffit.load(path)
+    v = np.asarray(m.values)
+    assert m.n_samples == 1439 and v.shape == (1439, 3) and m.grid is None
+    assert np.all(np.isfinite(v)) and np.all(v >= 0)
+    ti, pi_ = cartesian_to_spherical(np.asarray(m.wi))
+    to, po = cartesian_to_spherical(np.asarray(m.wo))
+    assert np.degrees(ti).min() > 9.9 and np.degrees(ti).max() < 80.1
+    # peak of the luminance: grazing incidence (80 deg), view near the mirror direction
+    k = int(np.argmax(v @ np.array([0.2126, 0.7152, 0.0722])))
+    assert np.degrees(ti[k]) == pytest.approx(80.0, abs=0.5)
+    assert abs(np.degrees(to[k]) - np.degrees(ti[k])) < 3.0
+    dphi = np.degrees(np.abs(np.angle(np.exp(1j * (po[k] - pi_[k])))))
+    assert dphi == pytest.approx(180.0, abs=3.0)
+
+
+def test_spectral_white_and_linearity():
+    M = spectral_to_rgb_matrix(WL)
+    np.testing.assert_allclose(np.ones(31) @ M, [1, 1, 1], rtol=1e-12)
+    np.testing.assert_allclose(0.25 * np.ones(31) @ M, [0.25, 0.25, 0.25], rtol=1e-12)
+    # a long-wavelength spectrum is red, a short-wavelength one blue
+    red = (np.asarray(WL) > 600).astype(float) @ M
+    blue = (np.asarray(WL) < 480).astype(float) @ M
+    assert red[0] > red[1] and red[0] > red[2]
+    assert blue[2] > blue[0] and blue[2] > blue[1]
+
+
+def write_cornell(path, rows, n_wl=31):
+    lines = ["# synthetic", str(n_wl), " ".join(str(int(w)) for w in WL[:n_wl])]
+    lines += [" ".join(f"{x:.6f}" for x in r) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_cornell_synthetic_grey(tmp_path):
+    rows = [[0.5, 0.0, 0.3, np.pi] + [0.2] * 31, [0.2, 0.0, 0.2, 1.0] + [0.7] * 31]
+    p = tmp_path / "grey.brdf"
+    write_cornell(p, rows)
+    m = brdffit.load(p)
+    np.testing.assert_allclose(np.asarray(m.values), [[0.2] * 3, [0.7] * 3], rtol=1e-6)
+    # light = first pair (theta_i, phi_i), view = second
+    ti, _ = cartesian_to_spherical(np.asarray(m.wi))
+    to, po = cartesian_to_spherical(np.asarray(m.wo))
+    np.testing.assert_allclose(ti, [0.5, 0.2], atol=1e-12)
+    np.testing.assert_allclose(to, [0.3, 0.2], atol=1e-12)
+    np.testing.assert_allclose(po, [np.pi, 1.0], atol=1e-6)  # file holds 6 decimals
+
+
+def test_cornell_wrong_column_count(tmp_path):
+    p = tmp_path / "cols.brdf"
+    write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + [0.2] * 30])
+    with pytest.raises(InputError, match="not a multiple of 35"):
+        brdffit.load(p)
