@@ -1,22 +1,28 @@
 """The model library: ``names()``, ``get(name)``; one file per model (SPEC 4).
 
 A module in this package that defines ``MODEL`` is registered under ``MODEL.name``.
+``get`` also accepts sums ("lambert+ggx+ggx", see ``compose``: names are case-insensitive and
+spaces are ignored) and multi-lobe Lafortune models (``get("lafortune", lobes=3)`` or
+``get("lafortune3")``).
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import pkgutil
+import re
 
 from .base import Model, Param
 
 _REGISTRY: dict[str, Model] = {}
+_NOT_MODELS = ("base", "compose", "albedo")
 
 
 def _discover() -> dict[str, Model]:
     if not _REGISTRY:
         for info in pkgutil.iter_modules(__path__):
-            if info.name.startswith("_") or info.name in ("base",):
+            if info.name.startswith("_") or info.name in _NOT_MODELS:
                 continue
             module = importlib.import_module(f"{__name__}.{info.name}")
             model = getattr(module, "MODEL", None)
@@ -30,15 +36,40 @@ def names() -> list[str]:
     return sorted(_discover())
 
 
-def get(name: str | Model) -> Model:
-    """A model by name; '+' composes models."""
-    if isinstance(name, Model):
-        return name
+def _one(key: str, original: str) -> Model:
     registry = _discover()
-    key = name.strip().lower()
     if key in registry:
         return registry[key]
-    raise KeyError(f"unknown model {name!r}; known: {', '.join(names())}")
+    lobes = re.fullmatch(r"lafortune(\d+)", key)
+    if lobes:
+        from .lafortune import lafortune
+
+        return lafortune(int(lobes.group(1)))
+    raise KeyError(f"unknown model {key!r} in {original!r}; known: {', '.join(names())}")
+
+
+@functools.lru_cache(maxsize=None)
+def _get(key: str, original: str) -> Model:
+    from .compose import compose
+
+    parts = key.split("+")
+    if any(not p for p in parts):
+        raise KeyError(f"malformed model name {original!r}: empty component")
+    return compose([_one(p, original) for p in parts])
+
+
+def get(name: str | Model, *, lobes: int | None = None) -> Model:
+    """A model by name; '+' composes models. ``lobes`` selects a multi-lobe Lafortune model."""
+    if isinstance(name, Model):
+        return name
+    key = "".join(str(name).split()).lower()
+    if lobes is not None:
+        if key != "lafortune":
+            raise KeyError(f"lobes= applies to 'lafortune' only, not {name!r}")
+        from .lafortune import lafortune
+
+        return lafortune(int(lobes))
+    return _get(key, str(name))
 
 
 __all__ = ["Model", "Param", "get", "names"]

@@ -72,3 +72,52 @@ def schlick_fresnel(f0, cos_theta_d):
     """Schlick's approximation F = f0 + (1 - f0) (1 - cos)^5."""
     c = jnp.clip(cos_theta_d, 0.0, 1.0)
     return f0 + (1.0 - f0) * (1.0 - c) ** 5
+
+
+def dot(a, b):
+    """Row-wise dot product, (N, 1)."""
+    return jnp.sum(a * b, axis=-1, keepdims=True)
+
+
+def safe_div(num, den, eps=COS_EPS):
+    """num / max(den, eps): for denominators that are non-negative by construction (cosines)."""
+    return num / jnp.maximum(den, eps)
+
+
+def hz_sq(h):
+    """cos^2 theta of a unit vector, floored at COS_EPS^2 so that dividing by it stays finite."""
+    return jnp.maximum(h[..., 2:3] ** 2, COS_EPS**2)
+
+
+def log_cap(dtype) -> float:
+    """Largest exponent ``capped_exp`` lets through: e^100 in float64, e^35 in float32.
+
+    Far above any measured reflectance (1/sr), yet a squared residual of that size is still finite,
+    so a model evaluated at a corner of its box (e.g. a Lafortune lobe with |C| > 1 and n = 1e4)
+    never hands the solver an inf.
+    """
+    return 35.0 if jnp.finfo(dtype).bits <= 32 else 100.0
+
+
+def capped_exp(x):
+    """exp(min(x, log_cap)): overflow-free exponential (see ``log_cap``)."""
+    return jnp.exp(jnp.minimum(x, log_cap(x.dtype)))
+
+
+def safe_log(x, tiny=1e-30):
+    """log(x) for x > 0, with the argument floored so that the gradient stays finite."""
+    return jnp.log(jnp.maximum(x, tiny))
+
+
+def capped_pow(base, exponent):
+    """max(base, 0) ** exponent via ``capped_exp``; 0 (with zero gradient) where base <= 0."""
+    positive = base > 0
+    safe_base = jnp.where(positive, base, 1.0)
+    return jnp.where(positive, capped_exp(exponent * jnp.log(safe_base)), 0.0)
+
+
+def v_cavity_g(n_dot_h, n_dot_l, n_dot_v, v_dot_h):
+    """Torrance-Sparrow / Cook-Torrance V-cavity masking-shadowing
+    G = min(1, 2 (n.h)(n.v)/(v.h), 2 (n.h)(n.l)/(v.h)), (N, 1)."""
+    vh = jnp.maximum(v_dot_h, COS_EPS)
+    return jnp.minimum(1.0, jnp.minimum(2.0 * n_dot_h * n_dot_v / vh, 2.0 * n_dot_h * n_dot_l / vh))

@@ -4,6 +4,17 @@ B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refrac
 Surfaces", EGSR 2007. T. S. Trowbridge, K. P. Reitz, JOSA 65(5), 1975. C. Schlick, "An Inexpensive
 BRDF Model for Physically-based Rendering", CGF 13(3), 1994.
 
+Parameters
+----------
+=====  ========  ===============  =======  =========  =============================================
+name   channels  bounds           default  role       meaning
+=====  ========  ===============  =======  =========  =============================================
+kd     3         [0, 1]           0.1      albedo     diffuse albedo (linear)
+ks     3         [0, 1]           0.5      albedo     specular scale (linear)
+alpha  1         [1e-4, 1] (log)  0.2      roughness  GGX roughness (= Mitsuba's alpha)
+f0     1         [0, 1]           0.04     fresnel    Schlick reflectance at normal incidence
+=====  ========  ===============  =======  =========  =============================================
+
 f_r = kd/pi + ks F(h.l) G(l, v) D(h) / (4 (n.l)(n.v))
 
 D(h) = alpha^2 / (pi (cos^2 th_h alpha^2 + sin^2 th_h)^2)    (the usual form, rearranged so that
@@ -13,6 +24,10 @@ F    = f0 + (1 - f0)(1 - h.l)^5                                   (Schlick)
 
 With kd = 0, ks = 1, f0 = 1 this is Mitsuba 3's ``roughconductor`` (distribution ggx, material
 none, sample_visible irrelevant for eval) divided by cos(theta_o).
+
+Lecture form: the specular term of the ambient + diffuse + specular sum, with the microfacet
+BRDF in place of r_s (v.r)^h: I_s = I_L (n.l) ks F G D / (4 (n.l)(n.v)); D is normalised
+(int D (n.h) dw = 1), so ks is a reflectance scale in [0, 1]. Reciprocal.
 """
 
 from __future__ import annotations
@@ -62,4 +77,5 @@ MODEL = Model(
     formula=formula,
     citation="Walter, Marschner, Li, Torrance: Microfacet Models for Refraction through Rough Surfaces, EGSR 2007",
     reciprocal=True,
+    doc=__doc__,
 )

@@ -2,8 +2,18 @@
 
 J. H. Lambert, *Photometria*, 1760.
 
+Parameters
+----------
+====  ========  ======  =======  ======  ==============================
+name  channels  bounds  default  role    meaning
+====  ========  ======  =======  ======  ==============================
+kd    3         [0, 1]  0.5      albedo  diffuse albedo (linear)
+====  ========  ======  =======  ======  ==============================
+
 Lecture form: I_d = I_L k_d (n . l). As a BRDF the cosine belongs to the rendering equation, not to
-f_r, and energy conservation fixes the 1/pi: f_r = k_d / pi, whose directional albedo is k_d.
+f_r, and energy conservation fixes the 1/pi: f_r = k_d / pi, whose directional albedo is k_d
+(so kd here is pi times a lecture k_d that was calibrated as "I_d / (I_L (n.l))"). The lecture's
+ambient term I_a k_a is a constant light, not part of any f_r. Equals Mitsuba's ``diffuse``.
 """
 
 from __future__ import annotations
@@ -27,4 +37,5 @@ MODEL = Model(
     formula=formula,
     citation="J. H. Lambert, Photometria, 1760",
     reciprocal=True,
+    doc=__doc__,
 )

@@ -1,0 +1,60 @@
+"""Blinn-Phong: the half-vector form of Phong's lobe, energy-normalised.
+
+J. F. Blinn, "Models of Light Reflection for Computer Synthesized Pictures", SIGGRAPH 1977.
+Normalisation (n+8)/(8 pi): T. Akenine-Moeller, E. Haines, N. Hoffman, *Real-Time Rendering*,
+3rd ed., 2008, sec. 7.6 (an approximation of the exact factor, within a few percent).
+
+Parameters
+----------
+=====  ========  =================  =======  ========  ===========================================
+name   channels  bounds             default  role      meaning
+=====  ========  =================  =======  ========  ===========================================
+kd     3         [0, 1]             0.1      albedo    diffuse albedo (linear)
+ks     3         [0, 1]             0.5      albedo    specular albedo, approximately (linear)
+n      1         [1, 1e4] (log)     20       exponent  Blinn exponent
+=====  ========  =================  =======  ========  ===========================================
+
+BRDF form implemented::
+
+    f_r = kd/pi + ks (n+8)/(8 pi) (n.h)^n,      h = (l + v)/|l + v|
+
+Lecture form (Blinn 1977)::
+
+    I = I_a k_a + I_L [ k_d (n.l) + k_s (n.h)^n ]
+
+Blinn replaced Phong's (v.r) with (n.h): cheaper for a distant light and viewer, and the lobe
+stretches correctly at grazing angles. Taken literally as a BRDF, the lecture's specular term is
+k_s (n.h)^n / (n.l) (not reciprocal). The modern form drops the 1/(n.l) and multiplies by
+(n+8)/(8 pi), so that ks is roughly the specular albedo whatever the exponent, and f_r is
+reciprocal (h is symmetric in l and v). kd = pi k_d as for Lambert; the ambient term is not part
+of f_r. Note that a Blinn-Phong exponent is about 4x the Phong exponent of the same highlight.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from . import _math as m
+from .base import Model, Param
+
+PARAMS = (
+    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
+    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular albedo (approximately)"),
+    Param("n", 1, 1.0, 1e4, 20.0, "exponent", doc="Blinn exponent"),
+)
+
+
+def formula(p, wi, wo):
+    n = p["n"]
+    h = m.half_vector(wi, wo)
+    return p["kd"] / jnp.pi + p["ks"] * (n + 8.0) / (8.0 * jnp.pi) * m.safe_pow(h[..., 2:3], n)
+
+
+MODEL = Model(
+    name="blinn_phong",
+    params=PARAMS,
+    formula=formula,
+    citation="J. F. Blinn, Models of Light Reflection for Computer Synthesized Pictures, SIGGRAPH 1977",
+    reciprocal=True,
+    doc=__doc__,
+)

@@ -1,0 +1,60 @@
+"""Oren-Nayar: rough diffuse reflection (the paper's qualitative model).
+
+M. Oren, S. K. Nayar, "Generalization of Lambert's Reflectance Model", SIGGRAPH 1994, eq. 30
+(the "qualitative model", without the interreflection term).
+
+Parameters
+----------
+=====  ========  ==============  =======  =========  ==============================================
+name   channels  bounds          default  role       meaning
+=====  ========  ==============  =======  =========  ==============================================
+kd     3         [0, 1]          0.5      albedo     albedo rho of the facets (linear)
+sigma  1         [0, pi/2]       0.3      roughness  standard deviation of the facet slope angle,
+                                                     **in radians** (the paper's sigma)
+=====  ========  ==============  =======  =========  ==============================================
+
+Formula::
+
+    f_r = kd/pi (A + B max(0, cos(ph_i - ph_o)) sin a tan b)
+    A = 1 - 0.5 sigma^2/(sigma^2 + 0.33),   B = 0.45 sigma^2/(sigma^2 + 0.09)
+    a = max(th_i, th_o),                     b = min(th_i, th_o)
+
+evaluated without angles: sin a sin b = sin th_i sin th_o, so
+cos(ph_i - ph_o) sin a tan b = (l_x v_x + l_y v_y) / max(n.l, n.v), which has no singularity at
+normal incidence or at the horizon. sigma = 0 is Lambert. Reciprocal (symmetric in l and v).
+Lecture form: the diffuse term k_d (n.l) of the lecture's sum generalised to rough surfaces.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+
+from . import _math as m
+from .base import Model, Param
+
+PARAMS = (
+    Param("kd", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="facet albedo"),
+    Param("sigma", 1, 0.0, math.pi / 2, 0.3, "roughness", doc="slope-angle standard deviation, radians"),
+)
+
+
+def formula(p, wi, wo):
+    s2 = p["sigma"] ** 2
+    a = 1.0 - 0.5 * s2 / (s2 + 0.33)
+    b = 0.45 * s2 / (s2 + 0.09)
+    cos_dphi_sin_tan = jnp.maximum(wi[..., 0:1] * wo[..., 0:1] + wi[..., 1:2] * wo[..., 1:2], 0.0) / jnp.maximum(
+        m.cos_theta(wi), m.cos_theta(wo)
+    )
+    return p["kd"] / jnp.pi * (a + b * cos_dphi_sin_tan)
+
+
+MODEL = Model(
+    name="oren_nayar",
+    params=PARAMS,
+    formula=formula,
+    citation="M. Oren, S. K. Nayar, Generalization of Lambert's Reflectance Model, SIGGRAPH 1994",
+    reciprocal=True,
+    doc=__doc__,
+)

@@ -1,0 +1,56 @@
+"""Phong, the lecture's form taken literally as a BRDF (not reciprocal, not energy-normalised).
+
+B. T. Phong, "Illumination for Computer Generated Pictures", CACM 18(6), 1975.
+
+Parameters
+----------
+=====  ========  =================  =======  ========  ===========================================
+name   channels  bounds             default  role      meaning
+=====  ========  =================  =======  ========  ===========================================
+kd     3         [0, 1]             0.1      albedo    diffuse albedo (linear)
+ks     3         [0, 1e4]           0.5      albedo    the lecture's r_s (linear); no normalisation,
+                                                       so sharp lobes need large values
+n      1         [1, 1e4] (log)     20       exponent  the lecture's h (shininess)
+=====  ========  =================  =======  ========  ===========================================
+
+Lecture form::
+
+    I = I_a k_a + I_L [ k_d (n.l) + r_s (v.r)^h ],      r = 2(n.l)n - l
+
+BRDF form implemented: divide the light-dependent part by the irradiance I_L (n.l)::
+
+    f_r = kd/pi + ks max(0, r.v)^n / (n.l)
+
+with kd = pi k_d (the lecture's diffuse coefficient times pi is the diffuse albedo), ks = r_s,
+n = h. The ambient term is a constant light, not part of f_r. Because of the 1/(n.l), this f_r is
+**not reciprocal** (f(l, v) != f(v, l)) and its albedo is not bounded by ks; the energy-normalised,
+reciprocal variant is ``phong``. (n.l) is clamped at 1e-7 at the horizon.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from . import _math as m
+from .base import Model, Param
+
+PARAMS = (
+    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo (pi times the lecture's k_d)"),
+    Param("ks", 3, 0.0, 1e4, 0.5, "albedo", linear=True, scale="linear", doc="the lecture's r_s"),
+    Param("n", 1, 1.0, 1e4, 20.0, "exponent", doc="the lecture's exponent h"),
+)
+
+
+def formula(p, wi, wo):
+    spec = m.safe_pow(m.dot(m.reflect(wi), wo), p["n"]) / m.cos_theta(wi)
+    return p["kd"] / jnp.pi + p["ks"] * spec
+
+
+MODEL = Model(
+    name="phong_classic",
+    params=PARAMS,
+    formula=formula,
+    citation="B. T. Phong, Illumination for Computer Generated Pictures, CACM 18(6), 1975",
+    reciprocal=False,
+    doc=__doc__,
+)
