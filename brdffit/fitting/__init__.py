@@ -1,0 +1,32 @@
+"""Fitting engine (SPEC 5): ``fit``, ``fit_batch``, ``FitResult``, ``compare``, ``Report``, ``select``.
+
+Pipeline of one fit: ``problem.prepare`` (exclude and count invalid samples, normalise weights)
+-> ``init.best_starts`` (variable-projection grid: nonlinear parameters on a coarse grid, linear
+ones by bounded least squares) -> a compiled optimistix solve on unconstrained axes (exact
+forward-mode Jacobians, float64) -> ``FitResult`` with metrics and standard errors.
+"""
+
+from __future__ import annotations
+
+from .api import fit
+from .losses import LOSSES
+from .result import FitResult
+from .solve import SOLVERS
+
+__all__ = ["LOSSES", "SOLVERS", "FitResult", "Report", "compare", "fit", "fit_batch", "select"]
+
+
+def __getattr__(name):
+    if name == "fit_batch":
+        from .batch import fit_batch
+
+        return fit_batch
+    if name in ("compare", "Report"):
+        from . import compare as _c
+
+        return getattr(_c, name)
+    if name == "select":
+        from .select import select
+
+        return select
+    raise AttributeError(name)

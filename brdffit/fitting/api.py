@@ -1,0 +1,176 @@
+"""`brdffit.fit`: one measurement, one model -> FitResult."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import UsageError
+from ..measurement import Measurement
+from ..models.base import Model
+from . import init as _init
+from .losses import check_loss
+from .problem import Data, evaluate, flat_residual, prepare, resolve_model
+from .result import FitResult
+from .solve import (
+    DEFAULT_ATOL,
+    DEFAULT_MAX_STEPS,
+    DEFAULT_RTOL,
+    STATUS_TEXT,
+    check_solver,
+    solve_optx,
+    solve_scipy,
+)
+
+#: Condition number of J'J above which standard errors are not reported.
+STDERR_MAX_COND = 1e12
+
+
+@functools.lru_cache(maxsize=None)
+def _jacobian_fn(model: Model, loss: str):
+    return jax.jit(jax.jacfwd(flat_residual(model, loss)))
+
+
+def standard_errors(model: Model, loss: str, params, data: Data, loss_value: float, n_residuals: int):
+    """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
+
+    None for a parameter at one of its bounds (the active constraint makes the Gaussian
+    approximation meaningless there) and for all when J'J is singular or ill conditioned
+    (non-identifiable parameter combinations, e.g. ks and f0 of a microfacet lobe with f0 ~ 1).
+    """
+    v = np.asarray(model.flatten(params))
+    J = np.asarray(_jacobian_fn(model, loss)(jnp.asarray(v), data))
+    lo, hi = model.bounds()
+    span = hi - lo
+    at_bound = (np.abs(v - lo) <= 1e-9 * span + 1e-300) | (np.abs(v - hi) <= 1e-9 * span)
+    free = ~at_bound
+    out: dict[str, np.ndarray | None] = {p.name: None for p in model.params}
+    if not free.any() or not np.all(np.isfinite(J)):
+        return out
+    Jf = J[:, free]
+    jtj = Jf.T @ Jf
+    eig = np.linalg.eigvalsh(jtj)
+    if eig[0] <= 0 or eig[-1] / eig[0] > STDERR_MAX_COND:
+        return out
+    dof = max(n_residuals - int(free.sum()), 1)
+    # Residuals are normalised by 1/sqrt(n): sigma^2 (J'J)^-1 of the unnormalised problem equals
+    # (sum r^2 / dof) (J'J)^-1 in these units.
+    cov = np.linalg.inv(jtj) * (loss_value / dof)
+    se = np.full(v.shape, np.nan)
+    se[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    i = 0
+    for p in model.params:
+        n = model.size(p)
+        block = se[i : i + n]
+        out[p.name] = None if np.any(np.isnan(block)) else block.copy()
+        i += n
+    return out
+
+
+def _start_from(init, model: Model) -> np.ndarray:
+    if isinstance(init, FitResult):
+        init = init.params
+    if isinstance(init, str):
+        if init != "defaults":
+            raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {init!r}")
+        init = model.defaults()
+    if not isinstance(init, Mapping):
+        raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {type(init).__name__}")
+    full = dict(model.defaults())
+    full.update({k: v for k, v in init.items()})
+    try:
+        v = np.asarray(model.flatten(full))
+    except ValueError as exc:
+        raise UsageError(f"init: {exc}") from None
+    lo, hi = model.bounds()
+    return np.clip(v, lo, hi)
+
+
+def fit(
+    measurement: Measurement,
+    model: str | Model,
+    *,
+    loss: str = "log",
+    solver: str = "lm",
+    init=None,
+    multistart: int = 0,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    rtol: float = DEFAULT_RTOL,
+    atol: float = DEFAULT_ATOL,
+    weights=None,
+    grid_budget: int = _init.GRID_BUDGET,
+    scipy_jac: str = "exact",
+) -> FitResult:
+    """Fit ``model`` to ``measurement``.
+
+    loss: l2 | cosine_l2 | log | cbrt | relative. solver: lm | gauss_newton | dogleg | bfgs | scipy.
+    init: None (variable-projection grid search, see ``brdffit.fitting.init``), "defaults", a
+    params dict (missing parameters take their defaults) or a FitResult. multistart: polish this
+    many further grid starts and keep the best. Non-convergence is reported in ``.status``, never
+    raised; parameters are never NaN.
+    """
+    loss = check_loss(loss)
+    solver = check_solver(solver)
+    if max_steps < 1:
+        raise UsageError("max_steps must be at least 1")
+    prep = prepare(measurement, weights)
+    m = resolve_model(model, prep.channels)
+    data = prep.data
+
+    compile_s = run_s = init_s = 0.0
+    if init is None:
+        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + max(0, int(multistart)), budget=grid_budget)
+        compile_s += c_s
+        run_s += r_s
+        init_s = c_s + r_s
+    else:
+        starts = _start_from(init, m)[None, :]
+
+    best = None
+    for v0 in starts:
+        if solver == "scipy":
+            v, value, code, steps, c_s, r_s = solve_scipy(
+                m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps, jac=scipy_jac
+            )
+        else:
+            x0 = jnp.asarray(m.to_unconstrained(m.unflatten(jnp.asarray(v0))))
+            x, value, code, steps, c_s, r_s = solve_optx(
+                m, loss, solver, x0, data, rtol=rtol, atol=atol, max_steps=max_steps
+            )
+            v = np.asarray(m.flatten(m.from_unconstrained(jnp.asarray(x))))
+        compile_s += c_s
+        run_s += r_s
+        if best is None or value < best[1]:
+            best = (v, value, code, steps, v0)
+    v, value, code, steps, v0 = best
+
+    params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
+    metrics = evaluate(m, params, data)
+    stderr = standard_errors(m, loss, params, data, value, prep.n_used * prep.channels)
+    status = STATUS_TEXT[code]
+    if solver == "scipy" and code == 0:
+        status = "converged (scipy least_squares)"
+    return FitResult(
+        model=m,
+        params=params,
+        loss=loss,
+        loss_value=float(value),
+        metrics=metrics,
+        steps=int(steps),
+        converged=code == 0,
+        status=status,
+        seconds={"compile": compile_s, "run": run_s, "init": init_s},
+        solver=solver,
+        data_name=measurement.name,
+        n_used=prep.n_used,
+        n_excluded=prep.n_excluded,
+        excluded=prep.excluded,
+        stderr=stderr,
+        start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
+        options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "multistart": int(multistart),
+                 "init": "grid" if init is None else "given"},
+    )

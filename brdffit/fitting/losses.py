@@ -1,0 +1,81 @@
+"""Fitting losses (SPEC 5): each is a per-sample transform g applied to model and reference alike.
+
+The residual of sample k, channel c is ``sqrt(w_k) * (g(f_model) - g(f_ref))``, with the weights
+normalised so that the sum of squared residuals is the weighted *mean* squared difference (the
+loss value does not grow with the number of samples, so tolerances mean the same on every data
+set). ``relative`` is the exception: it divides the difference by the reference, not a transform.
+
+| name        | residual                                                    | reference              |
+| ----------- | ----------------------------------------------------------- | ---------------------- |
+| `l2`        | f - f_ref                                                   |                        |
+| `cosine_l2` | (f - f_ref) cos th_i                                        | Ngan et al. 2005       |
+| `log`       | ln(1 + f cos th_i) - ln(1 + f_ref cos th_i)                 | Löw et al. 2012        |
+| `cbrt`      | cbrt(f cos th_i) - cbrt(f_ref cos th_i) (sign-preserving)   | Forés et al. 2012      |
+| `relative`  | (f - f_ref) / (|f_ref| + floor), floor = 1 % of mean |f_ref| per channel |      |
+
+Measured data can be slightly negative (RGB conversion of spectral data near a specular peak):
+every transform is defined there. ``log`` clamps 1 + f cos at 1e-12 (f cos < -1 is not a
+reflectance); ``cbrt`` is odd and smoothed within 1e-9 of zero, where the plain cube root has an
+infinite slope that would hand a Gauss-Newton solver an infinite Jacobian.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+LOSSES = ("l2", "cosine_l2", "log", "cbrt", "relative")
+
+#: Smoothing of the cube root at zero (in units of f cos th_i, 1/sr).
+CBRT_EPS = 1e-9
+
+
+def _cbrt(x):
+    # Odd, C1 at 0: sign(x) ((|x| + eps)^(1/3) - eps^(1/3)); finite derivative everywhere.
+    a = jnp.abs(x)
+    return jnp.sign(x) * (jnp.cbrt(a + CBRT_EPS) - jnp.cbrt(CBRT_EPS))
+
+
+def check_loss(loss: str) -> str:
+    from ..errors import UsageError
+
+    key = str(loss).strip().lower()
+    if key not in LOSSES:
+        raise UsageError(f"unknown loss {loss!r}; known: {', '.join(LOSSES)}")
+    return key
+
+
+def transform(loss: str, f, cos_i, floor):
+    """g(f) for the transform losses; for ``relative``, f / (|f_ref| + floor) is done by ``residual``.
+
+    f: (N, C); cos_i: (N, 1); floor: (C,).
+    """
+    if loss == "l2" or loss == "relative":
+        return f
+    if loss == "cosine_l2":
+        return f * cos_i
+    if loss == "log":
+        return jnp.log(jnp.maximum(1.0 + f * cos_i, 1e-12))
+    if loss == "cbrt":
+        return _cbrt(f * cos_i)
+    raise ValueError(loss)
+
+
+def residual(loss: str, f, ref, cos_i, sqrt_w, floor):
+    """Per-sample, per-channel residuals (N, C) of model values f against reference values ref."""
+    if loss == "relative":
+        d = (f - ref) / (jnp.abs(ref) + floor)
+    else:
+        d = transform(loss, f, cos_i, floor) - transform(loss, ref, cos_i, floor)
+    return sqrt_w * d
+
+
+def linearised_row_weights(loss: str, ref, cos_i, floor):
+    """(dg/df at the reference)^2, (N, C): the weights of the weighted linear least squares that
+    approximates this loss near the reference (used by the variable-projection initialisation)."""
+    if loss == "relative":
+        return 1.0 / (jnp.abs(ref) + floor) ** 2
+    one = jnp.ones_like(ref)
+    import jax
+
+    _, slope = jax.jvp(lambda f: transform(loss, f, cos_i, floor), (ref,), (one,))
+    return slope**2

@@ -1,0 +1,154 @@
+"""The least-squares problem shared by every solver: data arrays, residual functions.
+
+The measurement enters compiled code only as *arguments* (``Data``), never as constants, so one
+compiled solver serves every data set of the same shape (all UBO-81 tables, all BTF texels).
+Excluded samples stay in the arrays (shapes do not change) with weight 0 and harmless
+directions / values, so no NaN can leak from them into a residual or a gradient.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..errors import UsageError
+from ..measurement import Measurement
+from ..models import get as get_model
+from ..models.base import Model
+from . import losses as L
+
+
+class Data(tuple):
+    """(wi, wo, ref, sqrt_w, cos_i, floor): a pytree (a tuple) of arrays."""
+
+    __slots__ = ()
+
+    def __new__(cls, wi, wo, ref, sqrt_w, cos_i, floor):
+        return super().__new__(cls, (wi, wo, ref, sqrt_w, cos_i, floor))
+
+
+jax.tree_util.register_pytree_node(Data, lambda d: (tuple(d), None), lambda _, c: Data(*c))
+
+
+@dataclasses.dataclass(frozen=True)
+class Prepared:
+    data: Data
+    n_used: int
+    n_excluded: int
+    excluded: dict[str, int]  # reason -> count (a sample may have several reasons)
+    channels: int
+
+
+def resolve_model(model, channels: int) -> Model:
+    try:
+        m = get_model(model) if not isinstance(model, Model) else model
+    except KeyError as exc:
+        raise UsageError(str(exc.args[0]) if exc.args else str(exc)) from None
+    return m if m.channels == channels else m.with_channels(channels)
+
+
+def exclusion_reasons(m: Measurement) -> dict[str, int]:
+    values = np.asarray(m.values)
+    w = np.asarray(m.weights)
+    wi, wo = np.asarray(m.wi), np.asarray(m.wo)
+    return {
+        "weight 0": int(np.sum(~(w > 0))),
+        "non-finite value": int(np.sum(~np.all(np.isfinite(values), axis=1))),
+        "light below horizon": int(np.sum(~(wi[:, 2] > 0))),
+        "view below horizon": int(np.sum(~(wo[:, 2] > 0))),
+    }
+
+
+def prepare(m: Measurement, weights=None) -> Prepared:
+    """Arrays for the compiled residual; excluded samples get weight 0 and safe stand-ins."""
+    if not isinstance(m, Measurement):
+        raise UsageError(f"expected a brdffit.Measurement, got {type(m).__name__}")
+    mask = m.valid_mask()
+    w = np.asarray(m.weights, dtype=np.float64).copy()
+    if weights is not None:
+        extra = np.asarray(weights, dtype=np.float64)
+        if extra.shape != w.shape:
+            raise UsageError(f"weights has shape {extra.shape}, expected {w.shape}")
+        w = w * extra
+        mask &= np.isfinite(extra) & (extra > 0)
+    n_used = int(mask.sum())
+    if n_used == 0:
+        raise UsageError(f"{m.name}: no valid samples to fit (all have weight 0, non-finite values or lie below the horizon)")
+    c = m.n_channels
+    up = np.array([0.0, 0.0, 1.0])
+    wi = np.where(mask[:, None], np.asarray(m.wi, dtype=np.float64), up)
+    wo = np.where(mask[:, None], np.asarray(m.wo, dtype=np.float64), up)
+    ref = np.where(mask[:, None], np.nan_to_num(np.asarray(m.values, dtype=np.float64)), 0.0)
+    w = np.where(mask, w, 0.0)
+    # Normalise: sum of squared residuals = weighted mean over samples and channels.
+    sqrt_w = np.sqrt(w / (w.sum() * c))[:, None]
+    cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
+    mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w.sum()
+    floor = 0.01 * mean_abs + 1e-12
+    reasons = {k: v for k, v in exclusion_reasons(m).items() if v}
+    data = Data(*(jnp.asarray(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
+    return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
+
+
+def model_values(model: Model, params, data: Data):
+    return model.eval(params, data[0], data[1])
+
+
+def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    f = model.eval(params, wi, wo)
+    return L.residual(loss, f, ref, cos_i, sqrt_w, floor).reshape(-1)
+
+
+@functools.lru_cache(maxsize=None)
+def unconstrained_residual(model: Model, loss: str):
+    """r(x, data) with x on the solver's unconstrained axes (fold transform, see models.base)."""
+
+    def fn(x, data):
+        return residual_of_params(model, loss, model.from_unconstrained(x), data)
+
+    return fn
+
+
+@functools.lru_cache(maxsize=None)
+def flat_residual(model: Model, loss: str):
+    """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
+
+    def fn(v, data):
+        return residual_of_params(model, loss, model.unflatten(v), data)
+
+    return fn
+
+
+@functools.lru_cache(maxsize=None)
+def loss_values_fn(model: Model):
+    """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
+
+    def fn(v, data):
+        params = model.unflatten(v)
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        f = model.eval(params, wi, wo)
+        out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in L.LOSSES}
+        # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
+        used = (sqrt_w > 0).astype(f.dtype)
+        n = jnp.sum(used) * f.shape[1]
+        d = (f - ref) * used
+        out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
+        ld = (jnp.log(jnp.maximum(1 + f * cos_i, 1e-12)) - jnp.log(jnp.maximum(1 + ref * cos_i, 1e-12))) * used
+        out["log_rmse"] = jnp.sqrt(jnp.sum(ld**2) / n)
+        out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
+        out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
+        out["max_abs_error"] = jnp.max(jnp.abs(d))
+        return out
+
+    return jax.jit(fn)
+
+
+def evaluate(model: Model, params, data: Data) -> dict[str, float]:
+    v = model.flatten(params)
+    return {k: float(x) for k, x in loss_values_fn(model)(v, data).items()}

@@ -1,0 +1,156 @@
+"""`FitResult` (SPEC 5): what a fit found, how well, how fast, and whether it converged."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float
+
+from ..errors import InputError
+from ..models.base import Model
+
+FORMAT = "brdffit.fit/1"
+
+
+def _floats(a) -> list[float]:
+    return [float(x) for x in np.asarray(a, dtype=np.float64).reshape(-1)]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FitResult:
+    """One fit. ``params`` maps SPEC parameter names to numpy arrays of shape (size,)."""
+
+    model: Model
+    params: dict[str, np.ndarray]
+    loss: str
+    loss_value: float
+    metrics: dict[str, float]
+    steps: int
+    converged: bool
+    status: str
+    seconds: dict[str, float]  # "init", "compile", "run" (init is included in neither)
+    solver: str
+    data_name: str
+    n_used: int
+    n_excluded: int
+    excluded: dict[str, int] = dataclasses.field(default_factory=dict)
+    stderr: dict[str, np.ndarray | None] = dataclasses.field(default_factory=dict)
+    start: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    options: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def model_name(self) -> str:
+        return self.model.name
+
+    @property
+    def channels(self) -> int:
+        return self.model.channels
+
+    @property
+    def n_params(self) -> int:
+        return self.model.n_free
+
+    def eval(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N C"]:
+        """f_r of the fitted model at these directions (numpy, (N, C))."""
+        p = {k: jnp.asarray(v) for k, v in self.params.items()}
+        return np.asarray(self.model.eval(p, jnp.asarray(wi, dtype=jnp.float64), jnp.asarray(wo, dtype=jnp.float64)))
+
+    # -- JSON -------------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "model": self.model.name,
+            "channels": self.model.channels,
+            "params": {k: _floats(v) for k, v in self.params.items()},
+            "loss": self.loss,
+            "loss_value": float(self.loss_value),
+            "metrics": {k: float(v) for k, v in self.metrics.items()},
+            "steps": int(self.steps),
+            "converged": bool(self.converged),
+            "status": self.status,
+            "seconds": {k: float(v) for k, v in self.seconds.items()},
+            "solver": self.solver,
+            "data_name": self.data_name,
+            "n_used": int(self.n_used),
+            "n_excluded": int(self.n_excluded),
+            "excluded": {k: int(v) for k, v in self.excluded.items()},
+            "stderr": {k: (None if v is None else _floats(v)) for k, v in self.stderr.items()},
+            "start": {k: _floats(v) for k, v in self.start.items()},
+            "options": self.options,
+            "citation": self.model.citation,
+        }
+
+    def to_json(self, path: str | os.PathLike | None = None, indent: int = 2) -> str:
+        """JSON text (floats written with full precision: the round trip is exact)."""
+        text = json.dumps(self.to_dict(), indent=indent, allow_nan=True)
+        if path is not None:
+            Path(path).write_text(text + "\n")
+        return text
+
+    @classmethod
+    def from_json(cls, source: str | os.PathLike) -> "FitResult":
+        """From JSON text or a path to a fit.json file."""
+        path = None
+        text = source
+        if isinstance(source, os.PathLike) or (isinstance(source, str) and not source.lstrip().startswith("{")):
+            path = Path(source)
+            try:
+                text = path.read_text()
+            except OSError as exc:
+                raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(path, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        return cls.from_dict(d, path=path)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], path=None) -> "FitResult":
+        from ..models import get
+
+        try:
+            name, channels, params = d["model"], int(d.get("channels", 3)), d["params"]
+        except (KeyError, TypeError):
+            raise InputError(path, "not a brdffit fit result: needs 'model' and 'params'") from None
+        try:
+            model = get(name)
+        except KeyError as exc:
+            raise InputError(path, f"unknown model {name!r}") from exc
+        if model.channels != channels:
+            model = model.with_channels(channels)
+        try:
+            checked = model.check_params({k: np.asarray(v, dtype=np.float64) for k, v in params.items()})
+        except ValueError as exc:
+            raise InputError(path, str(exc)) from None
+        return cls(
+            model=model,
+            params={k: np.asarray(v, dtype=np.float64) for k, v in checked.items()},
+            loss=d.get("loss", ""),
+            loss_value=float(d.get("loss_value", float("nan"))),
+            metrics={k: float(v) for k, v in d.get("metrics", {}).items()},
+            steps=int(d.get("steps", 0)),
+            converged=bool(d.get("converged", False)),
+            status=str(d.get("status", "")),
+            seconds={k: float(v) for k, v in d.get("seconds", {}).items()},
+            solver=str(d.get("solver", "")),
+            data_name=str(d.get("data_name", "")),
+            n_used=int(d.get("n_used", 0)),
+            n_excluded=int(d.get("n_excluded", 0)),
+            excluded={k: int(v) for k, v in d.get("excluded", {}).items()},
+            stderr={k: (None if v is None else np.asarray(v, dtype=np.float64)) for k, v in d.get("stderr", {}).items()},
+            start={k: np.asarray(v, dtype=np.float64) for k, v in d.get("start", {}).items()},
+            options=dict(d.get("options", {})),
+        )
+
+    def __repr__(self) -> str:
+        ps = ", ".join(f"{k}={np.array2string(np.asarray(v), precision=4)}" for k, v in self.params.items())
+        return (
+            f"FitResult({self.model.name} on {self.data_name!r}: {ps}; {self.loss}={self.loss_value:.4g}, "
+            f"{self.status}, {self.steps} steps, {self.solver})"
+        )
