@@ -15,6 +15,8 @@ import click
 from ..errors import InputError
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+# click >= 8.2 calls it NoArgsIsHelpError, older versions NoArgsIsHelp (an empty tuple catches nothing)
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", getattr(click.exceptions, "NoArgsIsHelp", ()))
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -46,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     except click.exceptions.Abort:
         click.echo("brdffit: aborted", err=True)
         return EXIT_BAD_INPUT
-    except click.exceptions.NoArgsIsHelp as exc:  # pragma: no cover - click version dependent
+    except _NO_ARGS_IS_HELP as exc:  # pragma: no cover - click version dependent
         click.echo(exc.format_message() if hasattr(exc, "format_message") else str(exc), err=True)
         return EXIT_BAD_INPUT
     except click.ClickException as exc:
