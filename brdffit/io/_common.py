@@ -29,3 +29,56 @@ def file_size(path) -> int:
     import os
 
     return os.path.getsize(path)
+
+
+# -- metadata as JSON (EXR header, NPZ member) ------------------------------------------------------
+def _jsonable(v):
+    if isinstance(v, tuple | list):
+        return {"__tuple__": [_jsonable(x) for x in v]}
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, dict):
+        return {"__dict__": [[str(k), _jsonable(x)] for k, x in v.items()]}
+    if v is None or isinstance(v, bool | int | float | str):
+        return v
+    return str(v)  # anything exotic survives as its text
+
+
+def _from_jsonable(v):
+    if isinstance(v, dict) and "__tuple__" in v:
+        return tuple(_from_jsonable(x) for x in v["__tuple__"])
+    if isinstance(v, dict) and "__dict__" in v:
+        return tuple((k, _from_jsonable(x)) for k, x in v["__dict__"])
+    return v
+
+
+META_FIELDS = ("name", "source", "grid", "colour_space", "units")
+
+
+def meta_to_json(m) -> str:
+    import json
+
+    doc = {k: getattr(m, k) for k in META_FIELDS}
+    doc["extra"] = [[k, _jsonable(v)] for k, v in m.extra]
+    return json.dumps(doc, allow_nan=True)
+
+
+def meta_from_json(text: str) -> dict:
+    """Keyword arguments for Measurement(...) from meta_to_json's text."""
+    import json
+
+    doc = json.loads(text)
+    if not isinstance(doc, dict):
+        raise ValueError("metadata is not a JSON object")
+    out = {k: doc[k] for k in META_FIELDS if k in doc}
+    out["extra"] = {str(k): _from_jsonable(v) for k, v in doc.get("extra", [])}
+    return out
+
+
+def readable_mode(path) -> None:
+    """Give a freshly written temporary file the usual permissions (mkstemp makes it 0600)."""
+    import os
+
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)

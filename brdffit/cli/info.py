@@ -1,0 +1,53 @@
+"""``brdffit info SOURCE``: what a measurement holds (SPEC 7)."""
+
+from __future__ import annotations
+
+import click
+
+from . import cli
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.4g}"
+
+
+@cli.command("info")
+@click.argument("source", type=click.Path(path_type=str))
+def info(source: str) -> int:
+    """Show format, samples, grid, channels, value ranges, invalid samples and direction coverage."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from ..io import detect_format, load, summary
+
+    fmt = detect_format(source)
+    m = load(source)
+    s = summary(m)
+    console = Console()
+    head = Table(show_header=False, box=None, pad_edge=False)
+    head.add_column(style="bold")
+    head.add_column()
+    origin = s["format"]
+    head.add_row("source", str(source))
+    head.add_row("format", fmt if origin in (fmt, "?") else f"{fmt} (converted from {origin})")
+    head.add_row("name", s["name"])
+    head.add_row("samples", str(s["samples"]))
+    head.add_row("grid", str(s["grid"] or "scattered"))
+    head.add_row("channels", f"{s['channels']} ({s['colour_space']}, {s['units']})")
+    head.add_row(
+        "invalid samples",
+        f"{s['invalid']} (weight 0: {s['zero_weight']}, non-finite: {s['non_finite']})",
+    )
+    head.add_row("theta light", f"{s['theta_light_deg'][0]:.1f} .. {s['theta_light_deg'][1]:.1f} deg")
+    head.add_row("theta view", f"{s['theta_view_deg'][0]:.1f} .. {s['theta_view_deg'][1]:.1f} deg")
+    for key in ("interpolation", "extrapolated", "max_extrapolation_deg", "light_directions"):
+        if key in m.meta:
+            head.add_row(key.replace("_", " "), str(m.meta[key]))
+    console.print(head)
+    ranges = Table(title="values over valid samples (1/sr)", title_justify="left")
+    for col in ("channel", "min", "max", "mean", "negative"):
+        ranges.add_column(col, justify="right")
+    for r in s["ranges"]:
+        ranges.add_row(r["channel"], _fmt(r["min"]), _fmt(r["max"]), _fmt(r["mean"]), str(r["negative"]))
+    console.print(ranges)
+    return 0
