@@ -1,0 +1,15 @@
+"""Validation rendering in Mitsuba 3 (SPEC 6): spheres under a sweep of lights, panels, metrics.
+
+``render_sphere(source, lights, size, irradiance)`` renders one image per light with the SPEC
+framing; ``validate(source, fit, ...)`` renders a fit and its reference side by side and writes
+EXRs, PNG panels and metrics. Mitsuba is imported only in this package (through
+``brdffit._mitsuba.mitsuba()``).
+"""
+
+from __future__ import annotations
+
+from .bsdf import Source, as_source
+from .scene import render_sphere
+from .validate import Validation, default_lights, validate
+
+__all__ = ["Source", "Validation", "as_source", "default_lights", "render_sphere", "validate"]

@@ -1,0 +1,302 @@
+"""BRDF sources as Mitsuba BSDFs, with one definition per formula.
+
+Three kinds of source (SPEC 6):
+
+- an analytic model (a FitResult, or a ``(model_name, params)`` pair): rendered by
+  :class:`CallbackBSDF`, a Python ``mi.BSDF`` whose ``eval`` hands Mitsuba's direction arrays to
+  the very JAX ``model.eval`` the fitter uses. There is no second formula in Dr.Jit, so the
+  rendered material cannot drift from the fitted one.
+- a UBO-81 ``Measurement``: the same :class:`CallbackBSDF` around the NumPy interpolator of
+  :mod:`brdffit.render.tabulated`.
+- an RGL ``.bsdf`` file: Mitsuba's built-in ``measured`` plugin, the full-resolution reference.
+
+How the callback works. Mitsuba dispatches ``bsdf.eval`` through a Dr.Jit virtual call. With
+``JitFlag.SymbolicCalls`` off (set by :func:`evaluated_calls`) the call is *evaluated*: Dr.Jit runs
+the kernel up to the call, hands the Python method concrete arrays holding only the lanes that
+reached this BSDF, and the method may leave Dr.Jit (to NumPy, to JAX) and come back. In the
+``scalar_rgb`` fallback every sample calls the method with scalars: correct, but slow.
+
+Conventions at the boundary (SPEC 1): in Mitsuba's ``eval(ctx, si, wo)``, ``si.wi`` points to the
+camera (our ``wo``, the view) and ``wo`` points to the light (our ``wi``), both in the local
+shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). This module is the only place
+that converts between the two.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from jaxtyping import Float
+
+from .._mitsuba import mitsuba
+
+#: f_r(wi = towards light, wo = towards viewer) in the local frame -> (N, 3) in 1/sr, NumPy.
+BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+#: Fixed length of the arrays handed to the jitted model: one compilation per model serves every
+#: render and table (Mitsuba hands over a different number of lanes for each light).
+CHUNK = 1 << 16
+
+
+def model_brdf(model, params) -> BrdfFn:
+    """NumPy f_r of an analytic model: the JAX ``model.eval`` (jitted), channels broadcast to 3.
+
+    Inputs are evaluated in padded chunks of :data:`CHUNK` directions, so JAX compiles the model
+    once (about 0.15 s) and not once per array length.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    params = model.check_params(params)
+
+    @jax.jit
+    def f(wi, wo):
+        return model.eval(params, wi, wo)
+
+    def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        wi = np.asarray(wi, np.float64).reshape(-1, 3)
+        wo = np.asarray(wo, np.float64).reshape(-1, 3)
+        n = wi.shape[0]
+        out = np.empty((n, model.channels))
+        for start in range(0, n, CHUNK):
+            stop = min(n, start + CHUNK)
+            a = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
+            b = a.copy()
+            a[: stop - start] = wi[start:stop]
+            b[: stop - start] = wo[start:stop]
+            out[start:stop] = np.asarray(f(jnp.asarray(a), jnp.asarray(b)))[: stop - start]
+        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
+
+    return brdf
+
+
+def _vec_to_numpy(v) -> np.ndarray:
+    return np.stack([np.asarray(v.x, np.float64), np.asarray(v.y, np.float64), np.asarray(v.z, np.float64)], -1).reshape(-1, 3)
+
+
+@functools.cache
+def _callback_class():
+    """The CallbackBSDF class, defined on first use (it subclasses a Mitsuba type)."""
+    mi = mitsuba()
+    import drjit as dr
+
+    scalar = mi.variant().startswith("scalar")
+
+    class CallbackBSDF(mi.BSDF):
+        """A reflective BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.
+
+        ``sample`` draws cosine-weighted directions (the ``direct`` integrator of a validation
+        samples emitters only and never calls it; it is there so the BSDF is complete).
+        """
+
+        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback"):
+            mi.BSDF.__init__(self, props)
+            self.brdf = brdf
+            self.label = label
+            self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [self.m_flags]
+
+        def _eval_cos(self, si, wo, active):
+            # Mitsuba: si.wi = view, wo = light. SPEC: f_r(light, view) * cos(theta_light).
+            if scalar:
+                light = np.array([[wo.x, wo.y, wo.z]], np.float64)
+                view = np.array([[si.wi.x, si.wi.y, si.wi.z]], np.float64)
+            else:
+                light, view = _vec_to_numpy(wo), _vec_to_numpy(si.wi)
+            up = (light[:, 2] > 0) & (view[:, 2] > 0)
+            value = np.zeros((light.shape[0], 3))
+            if up.any():
+                f = np.asarray(self.brdf(light[up], view[up]), np.float64)
+                value[up] = f * light[up, 2:3]
+            value = np.where(np.isfinite(value), value, 0.0)
+            if scalar:
+                return mi.Color3f(*map(float, value[0])) if active else mi.Color3f(0.0)
+            v32 = value.astype(np.float32)
+            col = mi.Color3f(mi.Float(v32[:, 0]), mi.Float(v32[:, 1]), mi.Float(v32[:, 2]))
+            return dr.select(active, col, mi.Color3f(0.0))
+
+        def eval(self, ctx, si, wo, active=True):
+            return self._eval_cos(si, wo, active)
+
+        def pdf(self, ctx, si, wo, active=True):
+            pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
+            return dr.select(active & (mi.Frame3f.cos_theta(si.wi) > 0), pdf, 0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs = mi.BSDFSample3f()
+            bs.wo = wo
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_component = mi.UInt32(0)
+            value = self._eval_cos(si, wo, active)
+            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
+            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-12), 0.0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"CallbackBSDF[{self.label}]"
+
+    return CallbackBSDF
+
+
+def callback_bsdf(brdf: BrdfFn, label: str = "callback"):
+    """A Mitsuba BSDF object evaluating ``brdf`` (a NumPy f_r) through :class:`CallbackBSDF`."""
+    mi = mitsuba()
+    return _callback_class()(mi.Properties(), brdf=brdf, label=label)
+
+
+def measured_bsdf(path: str | Path):
+    """Mitsuba's built-in ``measured`` plugin for an RGL ``.bsdf`` file."""
+    from ..errors import InputError
+
+    mi = mitsuba()
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(str(path), "no such file")
+    try:
+        return mi.load_dict({"type": "measured", "filename": str(path)})
+    except Exception as exc:  # Mitsuba reports a bad tensor file as a RuntimeError
+        raise InputError(str(path), f"not a readable RGL tensor_file: {exc}") from None
+
+
+@contextlib.contextmanager
+def evaluated_calls():
+    """Dr.Jit virtual calls and loops run evaluated (not recorded) while rendering a callback BSDF."""
+    mi = mitsuba()
+    if mi.variant().startswith("scalar"):
+        yield
+        return
+    import drjit as dr
+
+    flags = (dr.JitFlag.SymbolicCalls, dr.JitFlag.SymbolicLoops)
+    old = [dr.flag(f) for f in flags]
+    for f in flags:
+        dr.set_flag(f, False)
+    try:
+        yield
+    finally:
+        for f, v in zip(flags, old):
+            dr.set_flag(f, v)
+
+
+def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
+    """f_r(wi = light, wo = view) of any Mitsuba BSDF at local directions, in 1/sr (cosine removed).
+
+    This is how a ``measured`` RGL reference is evaluated outside a render (the 81x81 table panel,
+    the closed-form agreement test), in the order Mitsuba renders it (SPEC 3).
+    """
+    mi = mitsuba()
+    wi = np.asarray(wi, np.float64).reshape(-1, 3)
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    n = wi.shape[0]
+    if mi.variant().startswith("scalar"):
+        out = np.zeros((n, 3))
+        ctx = mi.BSDFContext()
+        for k in range(n):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wo[k])
+            si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+            v = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
+            out[k] = np.array([v[0], v[1], v[2]], np.float64)
+    else:
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(mi.Float(wo[:, c].astype(np.float32)) for c in range(3)))
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+        with evaluated_calls():
+            v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(mi.Float(wi[:, c].astype(np.float32)) for c in range(3))))
+        out = np.stack([np.asarray(v[c], np.float64) for c in range(3)], -1).reshape(n, 3)
+    cos_l = wi[:, 2:3]
+    return np.where(cos_l > 0, out / np.where(cos_l > 0, cos_l, 1.0), 0.0)
+
+
+class Source:
+    """A BRDF to render: its label, its NumPy f_r(wi, wo) and its Mitsuba BSDF (made once).
+
+    Built by :func:`as_source` from a FitResult (anything with ``.model`` and ``.params``), a
+    ``(model_name_or_Model, params)`` pair, a UBO-81 ``Measurement``, or a path to an RGL ``.bsdf``
+    file (other measurement files are read with ``brdffit.load``).
+    """
+
+    def __init__(self, kind: str, label: str, brdf: BrdfFn | None = None, path: Path | None = None):
+        self.kind = kind  # "model" | "table" | "rgl"
+        self.label = label
+        self._brdf = brdf
+        self.path = path
+        self._bsdf = None
+
+    @property
+    def bsdf(self):
+        if self._bsdf is None:
+            self._bsdf = measured_bsdf(self.path) if self.kind == "rgl" else callback_bsdf(self._brdf, self.label)
+        return self._bsdf
+
+    def brdf(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
+        """f_r(wi = light, wo = view), (N, 3), 1/sr."""
+        if self.kind == "rgl":
+            return eval_bsdf(self.bsdf, wi, wo)
+        out = np.asarray(self._brdf(np.asarray(wi, np.float64), np.asarray(wo, np.float64)), np.float64)
+        return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out
+
+    def __repr__(self) -> str:
+        return f"Source({self.kind}: {self.label})"
+
+
+def as_source(obj) -> Source:
+    """Interpret any supported BRDF source (see :class:`Source`)."""
+    from .. import models
+    from ..errors import InputError
+    from ..measurement import Measurement
+    from .tabulated import UboInterpolator
+
+    if isinstance(obj, Source):
+        return obj
+    if hasattr(obj, "model") and hasattr(obj, "params"):  # a FitResult (duck-typed)
+        model = models.get(obj.model)
+        label = f"fit: {model.name}"
+        return Source("model", label, model_brdf(model, obj.params))
+    if isinstance(obj, tuple) and len(obj) == 2:
+        model = models.get(obj[0])
+        return Source("model", model.name, model_brdf(model, obj[1]))
+    if isinstance(obj, Measurement):
+        if obj.grid != "ubo81":
+            raise ValueError(
+                f"{obj.name}: only a UBO-81 measurement can be rendered as a table (grid={obj.grid!r}); "
+                "resample it first with brdffit.resample"
+            )
+        interp = UboInterpolator.from_measurement(obj)
+
+        def brdf(wi, wo):
+            out = interp(wi, wo)
+            return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out
+
+        return Source("table", obj.name, brdf)
+    if isinstance(obj, (str, Path)):
+        path = Path(obj)
+        if not path.exists():
+            raise InputError(str(path), "no such file or folder")
+        if path.suffix.lower() == ".bsdf":
+            return Source("rgl", path.stem, path=path)
+        import brdffit
+
+        m = brdffit.load(path)
+        if m.grid != "ubo81":
+            m = brdffit.resample(m, grid="ubo81")
+        src = as_source(m)
+        src.label = path.stem
+        return src
+    raise TypeError(
+        f"cannot render {type(obj).__name__}: give a FitResult, a (model_name, params) pair, "
+        "a UBO-81 Measurement or a path to a measurement file"
+    )

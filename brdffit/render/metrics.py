@@ -1,0 +1,105 @@
+"""Image and table metrics of a validation (SPEC 6): RMSE, relative RMSE, PSNR, FLIP.
+
+- ``rmse``: root mean square difference of the linear radiance over the pixels on the disc (all
+  channels), in the units of the render (radiance per unit irradiance times ``irradiance``).
+- ``relative_rmse``: ``rmse`` divided by the RMS of the reference over the same pixels.
+- ``psnr``: of the tone-mapped images (:func:`tonemap`), in dB, peak 1, over the disc.
+- ``flip``: mean LDR-FLIP (NVIDIA's ``flip-evaluator`` package) of the tone-mapped images over
+  the disc, in [0, 1], lower is better.
+
+Tone mapping: both images are scaled by one exposure, 1 / (99.5th percentile of the reference's
+largest channel on the disc), clipped to [0, 1] and sRGB-encoded. The exposure depends on the
+reference only, so a fit that is too bright or too dark is shown (and scored) as such.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from jaxtyping import Float
+
+
+def exposure(reference: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Scale that maps the 99.5th percentile of the reference (largest channel) to 1."""
+    ref = np.asarray(reference, np.float64)
+    peak = ref.max(axis=-1)
+    if mask is not None:
+        peak = peak[np.broadcast_to(mask, peak.shape)]
+    peak = peak[np.isfinite(peak)]
+    level = float(np.percentile(peak, 99.5)) if peak.size else 0.0
+    return 1.0 / level if level > 0 else 1.0
+
+
+def srgb_encode(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def tonemap(img: np.ndarray, scale: float) -> np.ndarray:
+    """Linear radiance -> display sRGB in [0, 1] with a fixed exposure ``scale``."""
+    return srgb_encode(np.nan_to_num(np.asarray(img, np.float64) * scale, nan=0.0, posinf=1.0, neginf=0.0))
+
+
+def luminance(img: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of linear RGB (..., 3)."""
+    return np.asarray(img, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def image_metrics(
+    reference: Float[np.ndarray, "H W 3"], test: Float[np.ndarray, "H W 3"], mask: np.ndarray, scale: float | None = None
+) -> dict[str, float]:
+    """rmse, relative_rmse, psnr, flip of one image pair over the ``mask`` pixels."""
+    import flip_evaluator
+
+    ref = np.asarray(reference, np.float64)
+    tst = np.asarray(test, np.float64)
+    m = np.asarray(mask, bool)
+    d = (tst - ref)[m]
+    rmse = float(np.sqrt(np.mean(d * d)))
+    ref_rms = float(np.sqrt(np.mean(ref[m] ** 2)))
+    scale = exposure(ref, m) if scale is None else scale
+    a, b = tonemap(ref, scale), tonemap(tst, scale)
+    mse_t = float(np.mean((a[m] - b[m]) ** 2))
+    psnr = float(10 * np.log10(1.0 / mse_t)) if mse_t > 0 else float("inf")
+    fmap, _, _ = flip_evaluator.evaluate(
+        a.astype(np.float32), b.astype(np.float32), "LDR", inputsRGB=True, applyMagma=False, computeMeanError=False
+    )
+    fmap = np.asarray(fmap).reshape(ref.shape[:2])
+    return {
+        "rmse": rmse,
+        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "psnr": psnr,
+        "flip": float(np.mean(fmap[m])),
+        "_flip_map": fmap,
+        "_mse_tonemapped": mse_t,
+    }
+
+
+def summarise(per_light: list[dict], reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+    """Overall metrics across all lights: pooled rmse / relative rmse / psnr, mean FLIP."""
+    m = np.broadcast_to(np.asarray(mask, bool), reference.shape[:3])
+    d = (np.asarray(test, np.float64) - np.asarray(reference, np.float64))[m]
+    rmse = float(np.sqrt(np.mean(d * d)))
+    ref_rms = float(np.sqrt(np.mean(np.asarray(reference, np.float64)[m] ** 2)))
+    mse_t = float(np.mean([p["_mse_tonemapped"] for p in per_light]))
+    return {
+        "rmse": rmse,
+        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "psnr": float(10 * np.log10(1.0 / mse_t)) if mse_t > 0 else float("inf"),
+        "flip": float(np.mean([p["flip"] for p in per_light])),
+    }
+
+
+def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) -> dict[str, float]:
+    """Errors of the fitted 81x81 table against the reference on the valid entries (f_r, 1/sr)."""
+    ref = np.asarray(reference, np.float64)[valid]
+    fit = np.asarray(fitted, np.float64)[valid]
+    d = fit - ref
+    rmse = float(np.sqrt(np.mean(d * d)))
+    ref_rms = float(np.sqrt(np.mean(ref * ref)))
+    log_d = np.log1p(np.maximum(fit, 0)) - np.log1p(np.maximum(ref, 0))
+    return {
+        "rmse": rmse,
+        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "log_rmse": float(np.sqrt(np.mean(log_d * log_d))),
+        "valid_pairs": int(np.count_nonzero(np.all(valid, axis=-1) if valid.ndim == 3 else valid)),
+    }

@@ -1,0 +1,144 @@
+"""The validation scene and ``render_sphere`` (SPEC 6: framing is normative).
+
+The scene holds only what a comparison needs: the unit sphere with the BSDF, an orthographic
+camera on +z looking down -z with +y up whose film covers exactly [-1, 1]^2 (the sphere fills the
+frame), one directional light, the ``direct`` integrator sampling emitters only (no BSDF samples:
+a directional light cannot be hit by them), a box pixel filter. All light directions render with
+one scene: only the emitter's transform changes between images (``mi.traverse``).
+
+Framing: pixel (row i, column j) has its centre at x = 2(j + 0.5)/size - 1, y = 1 - 2(i + 0.5)/size;
+each pixel is the box-filtered average over its footprint; pixels whose centre lies outside the
+disc x^2 + y^2 < 1 are set to 0.
+
+Tangent frame (anisotropic models). The sphere is Mitsuba's ``sphere`` shape turned so that its
+parameterisation pole points to world +y (``to_world`` = rotation by -90 degrees about x). Mitsuba's
+shading frame is then: normal n = (x, y, z) the surface point, tangent s = (z, 0, -x)/sqrt(x^2 + z^2)
+(the direction of increasing longitude about +y; at the image centre s = +x, pointing right),
+bitangent t = n x s (at the centre t = +y, up). Local phi = 0 is along s. Seen from the camera the
+tangents are horizontal along the equator and curve around the poles at the top and bottom of the
+disc, like lines of latitude on a globe seen from the side; the degenerate poles lie on the
+silhouette, not in the middle of the image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from jaxtyping import Float
+
+from .._mitsuba import mitsuba
+from .bsdf import Source, as_source, evaluated_calls
+
+#: Samples per pixel (stratified over the pixel footprint) for ``render_sphere``.
+DEFAULT_SPP = 4
+
+
+def light_directions(lights) -> Float[np.ndarray, "L 3"]:
+    """Unit world directions (L, 3) towards the lights, from directions (L, 3) or (theta, phi) (L, 2).
+
+    Angles are radians, theta from +z, phi from +x counter-clockwise seen from +z (SPEC 1).
+    """
+    a = np.asarray(lights, np.float64)
+    if a.ndim == 1:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] not in (2, 3) or a.shape[0] == 0:
+        raise ValueError(f"lights must be (L, 3) directions or (L, 2) (theta, phi) pairs, got shape {a.shape}")
+    if a.shape[1] == 2:
+        t, p = a[:, 0], a[:, 1]
+        a = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
+    norm = np.linalg.norm(a, axis=1, keepdims=True)
+    if not np.all(np.isfinite(a)) or np.any(norm == 0):
+        raise ValueError("light directions must be finite and non-zero")
+    return a / norm
+
+
+def pixel_centres(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """World (x, y) of the pixel centres, each (size, size), in the SPEC framing."""
+    c = (np.arange(size) + 0.5) * (2.0 / size) - 1.0
+    return np.meshgrid(c, -c)
+
+
+def disc_mask(size: int) -> np.ndarray:
+    """Pixels whose centre lies on the sphere's disc, (size, size) bool."""
+    x, y = pixel_centres(size)
+    return x * x + y * y < 1.0
+
+
+def _look_at(mi, origin, target, up):
+    return mi.ScalarTransform4f().look_at(origin=list(map(float, origin)), target=list(map(float, target)), up=list(map(float, up)))
+
+
+def _light_to_world(mi, d: np.ndarray):
+    """Transform of a directional emitter whose light travels along -d (d points to the light)."""
+    up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
+    return _look_at(mi, (0.0, 0.0, 0.0), -d, up)
+
+
+def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) -> dict:
+    """The Mitsuba scene description (see the module docstring)."""
+    mi = mitsuba()
+    return {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "sensor": {
+            "type": "orthographic",
+            # The orthographic camera images [-1, 1]^2 of its local x, y: the unit sphere fills it.
+            "to_world": _look_at(mi, (0, 0, 3), (0, 0, 0), (0, 1, 0)),
+            "film": {
+                "type": "hdrfilm",
+                "width": size,
+                "height": size,
+                "pixel_format": "rgb",
+                "rfilter": {"type": "box"},
+            },
+            "sampler": {"type": "stratified", "sample_count": spp, "jitter": True},
+        },
+        "sphere": {
+            "type": "sphere",
+            # Parameterisation pole to +y: see "Tangent frame" in the module docstring.
+            "to_world": mi.ScalarTransform4f().rotate(axis=[1, 0, 0], angle=-90.0),
+            "bsdf": bsdf,
+        },
+        "light": {
+            "type": "directional",
+            "to_world": _light_to_world(mi, light),
+            "irradiance": {"type": "rgb", "value": float(irradiance)},
+        },
+    }
+
+
+def render_sphere(
+    source,
+    lights,
+    size: int = 256,
+    irradiance: float = 1.0,
+    spp: int = DEFAULT_SPP,
+    seed: int = 0,
+    progress=None,
+) -> Float[np.ndarray, "L size size 3"]:
+    """Linear radiance of the unit sphere under each light, (L, size, size, 3) float32 (SPEC 6).
+
+    ``source``: a FitResult, a ``(model_name, params)`` pair, a UBO-81 Measurement, or a path to an
+    RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the
+    lights (L, 3), or (theta, phi) pairs in radians (L, 2). ``irradiance``: on a surface facing the
+    light. ``spp``: stratified samples per pixel. ``progress(k, L)`` is called after each image.
+    """
+    mi = mitsuba()
+    src: Source = as_source(source)
+    dirs = light_directions(lights)
+    size = int(size)
+    if size < 1 or spp < 1:
+        raise ValueError("size and spp must be >= 1")
+    scene = mi.load_dict(scene_dict(src.bsdf, size, int(spp), irradiance, dirs[0]))
+    params = mi.traverse(scene)
+    mask = disc_mask(size)
+    out = np.zeros((len(dirs), size, size, 3), np.float32)
+    with evaluated_calls():
+        for k, d in enumerate(dirs):
+            if k > 0:
+                params["light.to_world"] = _light_to_world(mi, d)
+                params.update()
+            img = np.asarray(mi.render(scene, spp=int(spp), seed=int(seed)))
+            out[k] = np.where(mask[..., None], img[..., :3], 0.0)
+            if progress is not None:
+                progress(k + 1, len(dirs))
+    return out

@@ -1,0 +1,214 @@
+"""``brdffit.validate``: a fit against its reference, rendered under a sweep of lights (SPEC 6).
+
+Written files (in ``out``, atomically: the folder appears complete or not at all):
+
+- ``reference_tTT_pPPP.exr``, ``fit_tTT_pPPP.exr``: linear radiance per light (theta, phi of the
+  light in integer degrees), 32-bit float RGB OpenEXR.
+- ``panel_tTT_pPPP.png``: reference | fit | error heat map with a colour bar, per light.
+- ``table.png``: the 81x81 UBO tables, measured | fitted | error; ``table_reference.exr`` and
+  ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr).
+- ``metrics.json``: rmse, relative_rmse, psnr, flip per light and overall (see
+  :mod:`brdffit.render.metrics`), the table metrics, the settings and where the time went.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._files import atomic_dir
+from ..grid import ubo_pairs
+from .bsdf import Source, as_source
+from .scene import DEFAULT_SPP, disc_mask, light_directions, render_sphere
+
+#: Default light sweep: (theta, phi) in degrees, from the camera direction to grazing.
+DEFAULT_LIGHTS_DEG = ((0, 0), (20, 45), (40, 135), (60, 225), (75, 315))
+
+
+def default_lights(n: int = 5) -> np.ndarray:
+    """``n`` light (theta, phi) pairs in radians: theta evenly 0..75 degrees, phi turning by 90."""
+    if n < 1:
+        raise ValueError("the number of lights must be >= 1")
+    if n == 5:
+        deg = np.asarray(DEFAULT_LIGHTS_DEG, np.float64)
+    else:
+        theta = np.round(np.linspace(0, 75, n)) if n > 1 else np.array([45.0])
+        phi = np.where(theta > 0, (45 + 90 * np.arange(n) - 90) % 360, 0)
+        deg = np.stack([theta, phi], -1)
+    return np.deg2rad(deg)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Validation:
+    """The result of :func:`validate`."""
+
+    lights: np.ndarray  # (L, 3) world directions towards the lights
+    reference: np.ndarray  # (L, size, size, 3) linear radiance
+    fit: np.ndarray  # (L, size, size, 3)
+    table_reference: np.ndarray  # (81, 81, 3) f_r, 1/sr
+    table_fit: np.ndarray  # (81, 81, 3)
+    metrics: dict  # "lights": [per light], "overall": {...}, "table": {...}
+    files: tuple[Path, ...]
+    seconds: dict[str, float]
+
+    def __repr__(self) -> str:
+        o = self.metrics["overall"]
+        return (
+            f"Validation({len(self.lights)} lights, {self.reference.shape[1]} px: rmse {o['rmse']:.4g}, "
+            f"psnr {o['psnr']:.1f} dB, flip {o['flip']:.3f}; {len(self.files)} files)"
+        )
+
+
+def _as_fit(fit) -> Source:
+    if isinstance(fit, (str, Path)) and str(fit).lower().endswith(".json"):
+        from ..fitting.result import FitResult
+
+        fit = FitResult.from_json(Path(fit))
+    return as_source(fit)
+
+
+def _table(src: Source, m=None) -> tuple[np.ndarray, np.ndarray]:
+    """(81, 81, 3) f_r of a source on the UBO-81 pairs, and the valid mask (81, 81)."""
+    wi, wo = ubo_pairs()
+    values = src.brdf(wi, wo).reshape(81, 81, 3)
+    valid = np.all(np.isfinite(values), axis=-1)
+    return values, valid
+
+
+def _tag(d: np.ndarray) -> str:
+    theta = int(round(np.degrees(np.arccos(np.clip(d[2], -1, 1)))))
+    phi = int(round(np.degrees(np.arctan2(d[1], d[0])) % 360)) % 360 if theta > 0 else 0
+    return f"t{theta:02d}_p{phi:03d}"
+
+
+def _write_exr(path: Path, img: np.ndarray) -> None:
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": np.ascontiguousarray(img, dtype=np.float32)}) as f:
+        f.write(str(path))
+
+
+def validate(
+    source,
+    fit,
+    lights=None,
+    size: int = 256,
+    out: str | Path | None = None,
+    force: bool = False,
+    spp: int = DEFAULT_SPP,
+    irradiance: float = 1.0,
+    progress=None,
+) -> Validation:
+    """Render ``fit`` and its reference ``source`` under each light, compare, and write the results.
+
+    ``source``: the reference: a path to an RGL ``.bsdf`` (Mitsuba's ``measured`` plugin) or to any
+    measurement file ``brdffit.load`` reads, or a UBO-81 ``Measurement`` (tabulated BSDF).
+    ``fit``: a FitResult, a path to a fit.json, or a ``(model_name, params)`` pair.
+    ``lights``: (L, 3) directions or (L, 2) (theta, phi) radians; default :data:`DEFAULT_LIGHTS_DEG`.
+    ``out``: folder to write (see the module docstring); nothing is written when None.
+    ``progress(stage, k, n)`` is called as the work goes on.
+    """
+    seconds: dict[str, float] = {}
+    t = time.perf_counter()
+
+    def lap(name):
+        nonlocal t
+        now = time.perf_counter()
+        seconds[name] = seconds.get(name, 0.0) + now - t
+        t = now
+
+    def tell(stage, k=0, n=0):
+        if progress is not None:
+            progress(stage, k, n)
+
+    if out is not None:
+        from .._files import check_target
+
+        check_target(out, force)  # fail before the work, not after it
+    ref_src = as_source(source)
+    fit_src = _as_fit(fit)
+    dirs = light_directions(default_lights() if lights is None else lights)
+    lap("load")
+
+    ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
+                             progress=lambda k, n: tell("render reference", k, n))
+    lap("render reference")
+    fit_imgs = render_sphere(fit_src, dirs, size=size, irradiance=irradiance, spp=spp,
+                             progress=lambda k, n: tell("render fit", k, n))
+    lap("render fit")
+
+    from .metrics import exposure, image_metrics, summarise, table_metrics
+
+    tab_ref, valid_ref = _table(ref_src)
+    tab_fit, _ = _table(fit_src)
+    lap("tables")
+    mask = disc_mask(int(size))
+    per_light, scales = [], []
+    for k, d in enumerate(dirs):
+        scale = exposure(ref_imgs[k], mask)
+        m = image_metrics(ref_imgs[k], fit_imgs[k], mask, scale)
+        theta, phi = np.degrees(np.arccos(np.clip(d[2], -1, 1))), np.degrees(np.arctan2(d[1], d[0])) % 360
+        per_light.append({"light": [float(x) for x in d], "theta_deg": float(theta), "phi_deg": float(phi), **m})
+        scales.append(scale)
+        tell("metrics", k + 1, len(dirs))
+    overall = summarise(per_light, ref_imgs, fit_imgs, mask)
+    valid3 = np.broadcast_to(valid_ref[..., None], tab_ref.shape)
+    table = table_metrics(tab_ref, tab_fit, valid3)
+    public = [{k: v for k, v in p.items() if not k.startswith("_")} for p in per_light]
+    metrics = {
+        "reference": ref_src.label,
+        "fit": fit_src.label,
+        "size": int(size),
+        "spp": int(spp),
+        "irradiance": float(irradiance),
+        "lights": public,
+        "overall": overall,
+        "table": table,
+    }
+    lap("metrics")
+
+    files: list[Path] = []
+    if out is not None:
+        from .panels import sphere_panel, table_panel
+
+        out = Path(out)
+        with atomic_dir(out, force=force) as tmp:
+            for k, d in enumerate(dirs):
+                tag = _tag(d)
+                _write_exr(tmp / f"reference_{tag}.exr", ref_imgs[k])
+                _write_exr(tmp / f"fit_{tag}.exr", fit_imgs[k])
+                files += [out / f"reference_{tag}.exr", out / f"fit_{tag}.exr"]
+            _write_exr(tmp / "table_reference.exr", tab_ref)
+            _write_exr(tmp / "table_fit.exr", tab_fit)
+            files += [out / "table_reference.exr", out / "table_fit.exr"]
+            lap("write exr")
+            for k, d in enumerate(dirs):
+                tag = _tag(d)
+                sphere_panel(tmp / f"panel_{tag}.png", ref_imgs[k], fit_imgs[k], scales[k], d, per_light[k],
+                             ref_src.label, fit_src.label)
+                files.append(out / f"panel_{tag}.png")
+                tell("panels", k + 1, len(dirs) + 1)
+            table_panel(tmp / "table.png", tab_ref, tab_fit, ref_src.label, fit_src.label, table)
+            files.append(out / "table.png")
+            tell("panels", len(dirs) + 1, len(dirs) + 1)
+            lap("write panels")
+            metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
+            (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True) + "\n")
+            files.append(out / "metrics.json")
+        lap("write metrics")
+    metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
+    return Validation(
+        lights=dirs,
+        reference=ref_imgs,
+        fit=fit_imgs,
+        table_reference=tab_ref,
+        table_fit=tab_fit,
+        metrics=metrics,
+        files=tuple(files),
+        seconds=dict(seconds),
+    )
