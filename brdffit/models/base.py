@@ -161,7 +161,8 @@ class Model:
         """f_r(wi, wo), (N, channels), pure JAX and differentiable."""
         wi = jnp.asarray(wi)
         wo = jnp.asarray(wo)
-        params = {k: jnp.asarray(v) for k, v in params.items()}
+        # Scalars are accepted for any parameter (broadcast over channels by the formula).
+        params = {k: jnp.atleast_1d(jnp.asarray(v)) for k, v in params.items()}
         f = self.formula(params, wi, wo)
         return jnp.broadcast_to(f, (wi.shape[0], self.channels))
 

@@ -28,7 +28,8 @@ PARAMS = (
 
 
 def formula(p, wi, wo):
-    return jnp.broadcast_to(p["kd"] / jnp.pi, (wi.shape[0], p["kd"].shape[0]))
+    # (1, C): broadcasts against the (N, C) of other terms; Model.eval broadcasts to (N, C).
+    return jnp.reshape(p["kd"], (1, -1)) / jnp.pi
 
 
 MODEL = Model(
