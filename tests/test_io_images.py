@@ -1,0 +1,116 @@
+"""Image folders: known per-direction colours come back (flat and per-view, PNG and EXR)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import brdffit
+from brdffit.errors import InputError
+from brdffit.io.images import direction_name, linear_to_srgb, srgb_to_linear
+
+N = 81
+
+
+def codes(seed=0):
+    """A distinct 8-bit sRGB colour per (light, view) pair."""
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, 256, size=(N, N, 3), dtype=np.uint8)
+
+
+def write_folder(root, kind="png", layout="flat", table=None, prefix="", skip=(), size=2):
+    root.mkdir(parents=True, exist_ok=True)
+    for i in range(N):
+        for j in range(N):
+            if (i, j) in skip:
+                continue
+            stem = prefix + direction_name(i, j)
+            folder = root
+            if layout == "views":
+                folder = root / stem[-11:]  # tvTTT_pvPPP
+                folder.mkdir(exist_ok=True)
+            if kind == "png":
+                Image.fromarray(np.tile(table[i, j], (size, size, 1))).save(folder / f"{stem}.png")
+            else:
+                import OpenEXR
+
+                px = {c: np.full((size, size), table[i, j, k], np.float32) for k, c in enumerate("RGB")}
+                OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, px).write(
+                    str(folder / f"{stem}.exr")
+                )
+    return root
+
+
+def test_srgb_eotf_exact():
+    c = np.array([0.0, 0.04045, 0.5, 1.0])
+    np.testing.assert_allclose(srgb_to_linear(c), [0, 0.04045 / 12.92, ((0.555) / 1.055) ** 2.4, 1.0], rtol=1e-15)
+    np.testing.assert_allclose(linear_to_srgb(srgb_to_linear(c)), c, atol=1e-12)
+
+
+@pytest.mark.parametrize("layout", ["flat", "views"])
+def test_png_folder_colours(tmp_path, layout):
+    table = codes(1)
+    root = write_folder(tmp_path / "btf", "png", layout, table, prefix="mat_")
+    m = brdffit.load(root)
+    assert m.grid == "ubo81" and m.meta["layout"] == ("flat" if layout == "flat" else "per-view folders")
+    np.testing.assert_allclose(m.table(), srgb_to_linear(table / 255.0), rtol=1e-12, atol=0)
+    wi, wo = brdffit.ubo_pairs()
+    np.testing.assert_array_equal(np.asarray(m.wi), wi)
+    np.testing.assert_array_equal(np.asarray(m.wo), wo)
+
+
+def test_exr_folder_colours_and_cos_option(tmp_path):
+    rng = np.random.default_rng(2)
+    table = rng.uniform(0, 4, size=(N, N, 3)).astype(np.float32)
+    root = write_folder(tmp_path / "exr", "exr", "views", table)
+    m = brdffit.load(root)
+    np.testing.assert_array_equal(m.table(), table.astype(np.float64))
+    m2 = brdffit.load(root, includes_cos=True, scale=2.0)
+    cos_l = brdffit.ubo_directions()[:, 2]
+    np.testing.assert_allclose(m2.table(), 2.0 * table / cos_l[:, None, None], rtol=1e-12)
+    assert m2.meta["includes_cos"] is True and m2.meta["scale"] == 2.0
+
+
+def test_region_mean(tmp_path):
+    # one image with a bright corner: the region picks it, the full mean averages it in
+    table = np.zeros((N, N, 3), np.uint8)
+    root = write_folder(tmp_path / "r", "png", "flat", table, size=4)
+    img = np.zeros((4, 4, 3), np.uint8)
+    img[:2, :2] = 255
+    Image.fromarray(img).save(root / f"{direction_name(5, 7)}.png")
+    full = brdffit.load(root).table()[5, 7]
+    part = brdffit.load(root, region=(0, 2, 0, 2)).table()[5, 7]
+    np.testing.assert_allclose(full, [0.25] * 3)
+    np.testing.assert_allclose(part, [1.0] * 3)
+
+
+def test_true_light_directions_recorded(tmp_path):
+    root = write_folder(tmp_path / "t", "png", "flat", codes(3))
+    wi, _ = brdffit.ubo_pairs()
+    shifted = wi + np.array([0.01, 0.0, 0.0])
+    m = brdffit.load(root, true_wi=shifted)
+    np.testing.assert_allclose(np.asarray(m.wi), shifted / np.linalg.norm(shifted, axis=1, keepdims=True))
+    assert m.meta["light_directions"] == "true (given)"
+    assert brdffit.load(root).meta["light_directions"].startswith("nominal")
+
+
+def test_missing_duplicate_offgrid_named(tmp_path):
+    table = codes(4)
+    root = write_folder(tmp_path / "m", "png", "flat", table, skip={(3, 4)})
+    with pytest.raises(InputError, match=direction_name(3, 4)):
+        brdffit.load(root)
+    Image.fromarray(table[3, 4][None, None]).save(root / f"{direction_name(3, 4)}.png")
+    brdffit.load(root)  # complete now
+    Image.fromarray(table[3, 4][None, None]).save(root / f"x_{direction_name(3, 4)}.png")
+    with pytest.raises(InputError, match="duplicated direction " + direction_name(3, 4)):
+        brdffit.load(root)
+    (root / f"x_{direction_name(3, 4)}.png").unlink()
+    Image.fromarray(table[3, 4][None, None]).save(root / "tl015_pl010_tv000_pv000.png")
+    with pytest.raises(InputError, match="tl015_pl010 is not on the UBO-81 grid"):
+        brdffit.load(root)
+    (root / "tl015_pl010_tv000_pv000.png").unlink()
+    (root / "notes.txt").write_text("ignored")
+    Image.fromarray(table[0, 0][None, None]).save(root / "photo.png")
+    with pytest.raises(InputError, match="photo.png: unparsable image name"):
+        brdffit.load(root)
