@@ -49,13 +49,15 @@ def _one(key: str, original: str) -> Model:
 
 
 @functools.lru_cache(maxsize=None)
-def _get(key: str, original: str) -> Model:
+def _get(key: str) -> Model:
+    # Cached on the normalised key: one Model object per model, so that jit caches keyed on the
+    # (hashable, static) model are shared by every spelling of its name.
     from .compose import compose
 
     parts = key.split("+")
     if any(not p for p in parts):
-        raise KeyError(f"malformed model name {original!r}: empty component")
-    return compose([_one(p, original) for p in parts])
+        raise KeyError(f"malformed model name {key!r}: empty component")
+    return compose([_one(p, key) for p in parts])
 
 
 def get(name: str | Model, *, lobes: int | None = None) -> Model:
@@ -69,7 +71,7 @@ def get(name: str | Model, *, lobes: int | None = None) -> Model:
         from .lafortune import lafortune
 
         return lafortune(int(lobes))
-    return _get(key, str(name))
+    return _get(key)
 
 
 __all__ = ["Model", "Param", "get", "names"]

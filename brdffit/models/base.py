@@ -46,6 +46,11 @@ class Param:
     role: str  # albedo | roughness | exponent | fresnel | shape | anisotropy
     #: The model is linear (and increasing) in this parameter: initialisation solves it by
     #: non-negative least squares for every trial of the nonlinear ones (variable projection).
+    #: Precisely: with theta the parameters *not* marked linear and lambda those marked linear,
+    #: f = B_0(theta) + sum_j lambda_j B_j(theta) -- jointly affine in all linear parameters,
+    #: each channel separately. B_0 = 0 in every model of the library except
+    #: ``ashikhmin_shirley`` (its specular term does not depend on rd). A parameter that is affine
+    #: alone but multiplies another linear one (f0 next to ks; rs next to rd) is not linear.
     linear: bool = False
     #: "linear" or "log": the axis the solver moves on (see module docstring).
     scale: str = "auto"

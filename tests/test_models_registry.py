@@ -1,0 +1,151 @@
+"""Issue 3: the registry, SPEC 4 names, composition naming, declared linearity, solver transform."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+from brdffit.models import get, names
+
+# SPEC 4, normative: name -> ((parameter, channels), ...)
+SPEC4 = {
+    "lambert": (("kd", 3),),
+    "phong": (("kd", 3), ("ks", 3), ("n", 1)),
+    "phong_classic": (("kd", 3), ("ks", 3), ("n", 1)),
+    "blinn_phong": (("kd", 3), ("ks", 3), ("n", 1)),
+    "ward": (("kd", 3), ("ks", 3), ("alpha_x", 1), ("alpha_y", 1)),
+    "torrance_sparrow": (("kd", 3), ("ks", 3), ("m", 1), ("f0", 1)),
+    "cook_torrance": (("kd", 3), ("ks", 3), ("alpha", 1), ("f0", 1)),
+    "ggx": (("kd", 3), ("ks", 3), ("alpha", 1), ("f0", 1)),
+    "oren_nayar": (("kd", 3), ("sigma", 1)),
+    "lafortune": (("kd", 3), ("rho", 3), ("cx", 1), ("cz", 1), ("n", 1)),
+    "ashikhmin_shirley": (("rd", 3), ("rs", 3), ("nu", 1), ("nv", 1)),
+}
+
+
+def test_names_are_spec4():
+    assert names() == sorted(SPEC4)
+
+
+@pytest.mark.parametrize("name", sorted(SPEC4))
+def test_parameter_table_is_spec4(name):
+    model = get(name)
+    assert model.name == name
+    assert tuple((p.name, p.channels) for p in model.params) == SPEC4[name]
+    assert model.citation and model.doc
+    assert model.reciprocal == (name != "phong_classic")
+    for p in model.params:
+        assert p.lower <= p.default <= p.upper
+        if p.role == "exponent":
+            assert p.upper >= 1e4
+        if p.role == "roughness" and p.scale == "log":
+            assert p.lower <= 1e-4
+        if p.role == "fresnel":
+            assert (p.lower, p.upper) == (0.0, 1.0)
+
+
+@pytest.mark.parametrize("name", ["phong", "phong_classic", "blinn_phong"])
+def test_lecture_models_document_lecture_and_brdf_forms(name):
+    doc = get(name).doc
+    assert "Lecture form" in doc and "BRDF form" in doc
+    assert "I_L" in doc and "(n.l)" in doc
+
+
+def test_oren_nayar_documents_radians():
+    assert "radians" in get("oren_nayar").doc and "radians" in get("oren_nayar").param("sigma").doc
+
+
+def test_composite_names_and_lookup():
+    m = get("lambert+ggx+ggx")
+    assert m.param_names == ("kd", "ggx1.ks", "ggx1.alpha", "ggx1.f0", "ggx2.ks", "ggx2.alpha", "ggx2.f0")
+    assert get(" Lambert + GGX +ggx ") is m  # case-insensitive, spaces ignored, cached
+    assert [c.name for c in m.components] == ["lambert", "ggx", "ggx"]
+    assert m.reciprocal and not get("lambert+phong_classic").reciprocal
+    assert get("ggx+blinn_phong").param_names == (
+        "kd", "ggx1.ks", "ggx1.alpha", "ggx1.f0", "blinn_phong1.ks", "blinn_phong1.n"
+    )
+    assert get("oren_nayar+ward").param_names == (
+        "kd", "oren_nayar1.sigma", "ward1.ks", "ward1.alpha_x", "ward1.alpha_y"
+    )
+    assert get("lambert+ashikhmin_shirley").param_names[:2] == ("kd", "ashikhmin_shirley1.rd")
+    assert get("ggx") is get("GGX") and get("ggx").components == ()
+    with pytest.raises(ValueError, match="one diffuse"):
+        get("lambert+oren_nayar")
+    with pytest.raises(KeyError, match="unknown model"):
+        get("lambert+nosuch")
+    with pytest.raises(KeyError):
+        get("lambert++ggx")
+
+
+def test_lafortune_lobes():
+    m3 = get("lafortune", lobes=3)
+    assert m3 is get("lafortune3") and m3.name == "lafortune3"
+    assert m3.param_names[:5] == ("kd", "rho1", "cx1", "cz1", "n1") and m3.param_names[-1] == "n3"
+    assert len({m3.param(f"n{j}").default for j in (1, 2, 3)}) == 3  # lobes start distinct
+    assert get("lafortune", lobes=1) is get("lafortune")
+    with pytest.raises(ValueError):
+        get("lafortune", lobes=0)
+
+
+def _pairs(n=48, seed=0):
+    """Random pairs plus mirror pairs (where sharp lobes are not ~0)."""
+    rng = np.random.default_rng(seed)
+    th = np.arccos(rng.uniform(0.05, 1.0, (2, n)))
+    ph = rng.uniform(0, 2 * np.pi, (2, n))
+    v = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+    wi = np.concatenate([v[0], v[0]])
+    wo = np.concatenate([v[1], v[0] * [-1.0, -1.0, 1.0]])
+    return wi, wo
+
+
+def _affine_defect(model, base, names_, rng, wi, wo):
+    """Relative misfit of f as a jointly affine function of the parameters ``names_`` (others at
+    ``base``): f(lam) vs f(lam0) + sum_j (lam_j - lam0_j) B_j, lam0 = lower bounds, B_j from a
+    probe step of half the parameter's range."""
+
+    def f(q):
+        return np.asarray(model.eval(q, wi, wo))
+
+    lam0 = {k: np.full_like(base[k], model.param(k).lower) for k in names_}
+    step = {k: 0.5 * (model.param(k).upper - model.param(k).lower) for k in names_}
+    ref = dict(base, **lam0)
+    f0 = f(ref)
+    lam = {k: lam0[k] + rng.uniform(0.1, 0.4, base[k].shape) * 2 * step[k] for k in names_}
+    pred = f0.copy()
+    for k in names_:
+        bj = (f(dict(ref, **{k: lam0[k] + step[k]})) - f0) / step[k]
+        d = lam[k] - lam0[k]
+        pred = pred + (d if d.size > 1 else d[0]) * bj
+    got = f(dict(base, **lam))
+    return np.max(np.abs(got - pred)) / max(np.max(np.abs(got)), 1e-300)
+
+
+@pytest.mark.parametrize("name", sorted(SPEC4) + ["lambert+ggx+ggx", "lafortune3"])
+def test_linear_flags_are_exact_and_maximal(name):
+    model = get(name)
+    wi, wo = _pairs()
+    rng = np.random.default_rng(1)
+    base = {k: np.asarray(v) for k, v in model.defaults().items()}
+    lin = [p.name for p in model.params if p.linear]
+    assert lin, "every model has a linear albedo"
+    assert all(model.param(k).lower == 0.0 for k in lin)
+    assert _affine_defect(model, base, lin, rng, wi, wo) < 1e-10
+    for p in model.params:
+        if not p.linear:
+            # marking it linear too would be wrong: the model is not jointly affine in it
+            assert _affine_defect(model, base, lin + [p.name], rng, wi, wo) > 1e-6, p.name
+
+
+@pytest.mark.parametrize("name", sorted(SPEC4) + ["lambert+ggx+ggx"])
+def test_unconstrained_roundtrip_and_samples_in_bounds(name):
+    model = get(name)
+    lo, hi = model.bounds()
+    for key in jax.random.split(jax.random.key(0), 4):
+        p = model.sample(key)
+        v = np.asarray(model.flatten(p))
+        assert np.all((lo <= v) & (v <= hi))
+        back = model.flatten(model.from_unconstrained(model.to_unconstrained(p)))
+        np.testing.assert_allclose(back, v, rtol=1e-9, atol=1e-12)
+    corner = model.unflatten(lo)
+    np.testing.assert_allclose(model.flatten(model.from_unconstrained(model.to_unconstrained(corner))), lo, atol=1e-12)
