@@ -40,6 +40,10 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
 
     from ..render import default_lights, validate
     from ..render.scene import DEFAULT_SPP
+    from ..render.validate import as_fit, as_source
+
+    # Read both inputs before any progress is shown: bad input is one line, nothing else.
+    reference, fit = as_source(source), as_fit(fit_json)
 
     t_import = time.perf_counter() - t0
     stages = ("render reference", "render fit", "metrics", "panels")
@@ -51,7 +55,7 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
             if stage in tasks:
                 bar.update(tasks[stage], completed=k, total=n)
 
-        v = validate(source, fit_json, lights=default_lights(n_lights), size=size, out=out_path, force=force,
+        v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
                      spp=spp or DEFAULT_SPP, progress=progress)
     o = v.metrics["overall"]
     click.echo(

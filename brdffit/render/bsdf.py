@@ -39,8 +39,10 @@ BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 #: Fixed length of the arrays handed to the jitted model: one compilation per model serves every
-#: render and table (Mitsuba hands over a different number of lanes for each light).
+#: render and table (Mitsuba hands over a different number of lanes for each light). Calls with at
+#: most SMALL directions (the scalar variant: one per call) use a second, small shape.
 CHUNK = 1 << 16
+SMALL = 16
 
 
 def model_brdf(model, params) -> BrdfFn:
@@ -63,9 +65,10 @@ def model_brdf(model, params) -> BrdfFn:
         wo = np.asarray(wo, np.float64).reshape(-1, 3)
         n = wi.shape[0]
         out = np.empty((n, model.channels))
-        for start in range(0, n, CHUNK):
-            stop = min(n, start + CHUNK)
-            a = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
+        length = SMALL if n <= SMALL else CHUNK
+        for start in range(0, n, length):
+            stop = min(n, start + length)
+            a = np.tile(np.array([[0.0, 0.0, 1.0]]), (length, 1))
             b = a.copy()
             a[: stop - start] = wi[start:stop]
             b[: stop - start] = wo[start:stop]

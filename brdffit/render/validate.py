@@ -63,7 +63,8 @@ class Validation:
         )
 
 
-def _as_fit(fit) -> Source:
+def as_fit(fit) -> Source:
+    """The fit to validate: a FitResult, a path to a fit.json, a (model_name, params) pair."""
     if isinstance(fit, (str, Path)) and str(fit).lower().endswith(".json"):
         from ..fitting.result import FitResult
 
@@ -131,7 +132,7 @@ def validate(
 
         check_target(out, force)  # fail before the work, not after it
     ref_src = as_source(source)
-    fit_src = _as_fit(fit)
+    fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
     lap("load")
 
