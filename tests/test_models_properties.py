@@ -1,0 +1,112 @@
+"""Issue 3 item 3, property tests (hypothesis): every model is non-negative for any parameters in
+its box and any directions in the closed upper hemisphere; reciprocal models are reciprocal
+(``phong_classic`` is not, and is shown not to be); directional albedo at the defaults is <= 1
+for any view direction up to 89.9 degrees (``brdffit.albedo``), and albedo is accurate where it is
+known in closed form."""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import brdffit
+from brdffit.grid import spherical_to_cartesian
+from brdffit.models import get, names
+
+MODELS = names() + ["lambert+ggx+ggx", "lafortune3"]
+RECIPROCAL = [n for n in MODELS if get(n).reciprocal]
+PAIRS = 16  # direction pairs per example (fixed: one jit compilation per model)
+CASES = settings(max_examples=25, deadline=None, derandomize=True)
+
+
+def param_strategy(model):
+    """Each parameter anywhere in its box (bounds included; log axes drawn log-uniformly)."""
+
+    def one(p):
+        if p.scale == "log":
+            a, b = np.log(p.lower), np.log(p.upper)
+            return st.floats(a, b).map(lambda y, p=p: float(np.clip(np.exp(y), p.lower, p.upper)))
+        return st.floats(p.lower, p.upper)
+
+    return st.fixed_dictionaries({p.name: one(p) for p in model.params})
+
+
+directions = st.lists(
+    st.tuples(st.floats(0.0, np.pi / 2), st.floats(0.0, 2 * np.pi)), min_size=PAIRS, max_size=PAIRS
+)
+
+
+def to_vectors(angles):
+    a = np.asarray(angles)
+    v = spherical_to_cartesian(a[:, 0], a[:, 1])
+    v[:, 2] = np.maximum(v[:, 2], 0.0)  # the horizon itself, not -1e-17
+    return v
+
+
+@functools.lru_cache(maxsize=None)
+def jitted_eval(name):
+    model = get(name)
+    return jax.jit(lambda p, wi, wo: model.eval(p, wi, wo))
+
+
+@pytest.mark.parametrize("name", MODELS)
+@CASES
+@given(data=st.data())
+def test_non_negative_and_finite(name, data):
+    model = get(name)
+    p = data.draw(param_strategy(model))
+    wi = to_vectors(data.draw(directions))
+    wo = to_vectors(data.draw(directions))
+    f = np.asarray(jitted_eval(name)(p, wi, wo))
+    assert np.all(np.isfinite(f)) and np.all(f >= 0), (p, wi, wo, f)
+
+
+@pytest.mark.parametrize("name", RECIPROCAL)
+@CASES
+@given(data=st.data())
+def test_reciprocal(name, data):
+    model = get(name)
+    p = data.draw(param_strategy(model))
+    wi = to_vectors(data.draw(directions))
+    wo = to_vectors(data.draw(directions))
+    ev = jitted_eval(name)
+    a, b = np.asarray(ev(p, wi, wo)), np.asarray(ev(p, wo, wi))
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * max(np.max(np.abs(a)), 1.0))
+
+
+def test_phong_classic_is_not_reciprocal():
+    model = get("phong_classic")
+    assert not model.reciprocal
+    wi = spherical_to_cartesian(np.deg2rad([60.0]), [0.0])
+    wo = spherical_to_cartesian(np.deg2rad([30.0]), [np.pi])
+    p = model.defaults()
+    a, b = model.eval(p, wi, wo), model.eval(p, wo, wi)
+    assert not np.allclose(a, b, rtol=1e-3)
+
+
+@pytest.mark.parametrize("name", MODELS)
+@settings(max_examples=8, deadline=None, derandomize=True)
+@given(theta=st.floats(0.0, np.deg2rad(89.9)), phi=st.floats(0.0, 2 * np.pi))
+def test_albedo_at_defaults_at_most_one(name, theta, phi):
+    model = get(name)
+    wo = spherical_to_cartesian(theta, phi)
+    a = np.asarray(brdffit.albedo(model, model.defaults(), wo))
+    assert a.shape == (3,)
+    assert np.all(a > 0) and np.all(a <= 1.0), (np.rad2deg(theta), a)
+
+
+def test_albedo_closed_forms():
+    """Lambert: kd at any angle. Normalised Phong at normal incidence: kd + ks exactly, even for
+    a lobe of exponent 1e4 (checks that the quadrature resolves sharp lobes)."""
+    th = np.deg2rad([0.0, 30.0, 60.0, 85.0, 89.0, 89.9])
+    wo = spherical_to_cartesian(th, 0.7 + 0 * th)
+    a = np.asarray(brdffit.albedo("lambert", {"kd": np.array([0.2, 0.5, 0.9])}, wo))
+    np.testing.assert_allclose(a, np.broadcast_to([0.2, 0.5, 0.9], a.shape), rtol=1e-4)
+    for n in (1.0, 20.0, 1e3, 1e4):
+        a = np.asarray(brdffit.albedo("phong", {"kd": 0.1, "ks": 0.6, "n": n}, np.array([0.0, 0.0, 1.0])))
+        np.testing.assert_allclose(a, 0.7, rtol=1e-4, err_msg=f"n={n}")
