@@ -28,7 +28,7 @@ from . import losses as L
 from .problem import Data
 
 #: Total number of grid points to aim for (split evenly over the nonlinear parameters).
-GRID_BUDGET = 256
+GRID_BUDGET = 128
 #: Fraction of each axis kept away from the bounds (a roughness of exactly 1e-4 is a bad start).
 GRID_MARGIN = 0.04
 

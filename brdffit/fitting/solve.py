@@ -16,6 +16,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+import lineax as lx
 import optimistix as optx
 
 from ..errors import UsageError
@@ -42,12 +43,14 @@ def check_solver(solver: str) -> str:
 
 
 def make_solver(name: str, rtol: float, atol: float):
+    # Parameters held at a bound (active set, see ``fit``) have zero Jacobian columns: the
+    # undamped Gauss-Newton step then needs a solver for rank-deficient systems (SVD).
     if name == "lm":
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     if name == "gauss_newton":
-        return optx.GaussNewton(rtol=rtol, atol=atol)
+        return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=lx.SVD())
     if name == "dogleg":
-        return optx.Dogleg(rtol=rtol, atol=atol)
+        return optx.Dogleg(rtol=rtol, atol=atol, linear_solver=lx.SVD())
     if name == "bfgs":
         # A minimiser: optimistix minimises the sum of squares of the residual.
         return optx.BFGS(rtol=rtol, atol=atol)
@@ -75,18 +78,24 @@ STATUS_TEXT = {
 
 
 def _solve_core(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    fn = unconstrained_residual(model, loss)
+    base = unconstrained_residual(model, loss)
     solver = make_solver(solver_name, rtol, atol)
 
-    def loss_of(x, data):
-        r = fn(x, data)
+    def fn(x, args):
+        data, free, anchor = args
+        # Held parameters (free = False) stay at their anchor value; their columns are zero.
+        return base(jnp.where(free, x, anchor), data)
+
+    def loss_of(x, args):
+        r = fn(x, args)
         return jnp.sum(r**2)
 
-    def run(x0, data):
-        sol = optx.least_squares(fn, solver, x0, args=data, max_steps=max_steps, throw=False)
-        x = sol.value
-        l0 = loss_of(x0, data)
-        l1 = loss_of(x, data)
+    def run(x0, data, free):
+        args = (data, free, x0)
+        sol = optx.least_squares(fn, solver, x0, args=args, max_steps=max_steps, throw=False)
+        x = jnp.where(free, sol.value, x0)
+        l0 = loss_of(x0, args)
+        l1 = loss_of(x, args)
         ok = jnp.all(jnp.isfinite(x)) & jnp.isfinite(l1) & (l1 <= l0)
         code = _status_code(sol.result)
         # Fallback: the start (finite by construction) when the solve produced junk.
@@ -113,26 +122,28 @@ def _shape_key(tree):
     return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
 
 
-def compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, batched: bool = False):
+def compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free, batched: bool = False):
     """The compiled solve for these shapes, and its compile time (0 when cached)."""
-    key = (model, loss, solver_name, rtol, atol, max_steps, _shape_key((x0, data)), batched)
+    key = (model, loss, solver_name, rtol, atol, max_steps, _shape_key((x0, data, free)), batched)
     hit = _CACHE.get(key)
     if hit is not None:
         return hit.fn, 0.0
     core = _solve_core(model, loss, solver_name, rtol, atol, max_steps)
     fn = jax.vmap(core) if batched else core
     t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(x0, data).compile()
+    compiled = jax.jit(fn).lower(x0, data, free).compile()
     dt = time.perf_counter() - t0
     _CACHE[key] = _Compiled(compiled, dt)
     return compiled, dt
 
 
-def solve_optx(model, loss, solver_name, x0, data, *, rtol, atol, max_steps):
-    """Returns (x, loss value, status code, steps, compile s, run s)."""
-    fn, compile_s = compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data)
+def solve_optx(model, loss, solver_name, x0, data, free, *, rtol, atol, max_steps):
+    """Returns (x, loss value, status code, steps, compile s, run s); ``free`` (P,) bool marks
+    the parameters the solver may move (the others stay at x0)."""
+    free = jnp.asarray(free, dtype=bool)
+    fn, compile_s = compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free)
     t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(x0, data))
+    out = jax.block_until_ready(fn(x0, data, free))
     run_s = time.perf_counter() - t0
     x, value, code, steps = (np.asarray(a) for a in out)
     return x, float(value), int(code), int(steps), compile_s, run_s
