@@ -1,0 +1,79 @@
+"""``brdffit compare SOURCE [--models ...] [--solvers ...] [--losses ...] -o DIR``: error against
+run time for every combination (SPEC 7). Writes report.csv, report.json, pareto.png. Exit 1 when
+any fit did not converge (the rows say which)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from . import EXIT_NOT_CONVERGED, EXIT_OK, cli
+
+
+def _split(values: tuple[str, ...]) -> list[str]:
+    out = []
+    for v in values:
+        out.extend(x.strip() for x in v.split(",") if x.strip())
+    return out
+
+
+@cli.command("compare")
+@click.argument("source", type=click.Path(path_type=str))
+@click.option("--models", multiple=True, help="Models (repeat or comma-separate) [all base models].")
+@click.option("--solvers", multiple=True, help="Solvers [lm, dogleg, bfgs, scipy].")
+@click.option("--losses", multiple=True, help="Losses [log].")
+@click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [compare-<name>].")
+@click.option("--force", is_flag=True, help="Replace an existing output folder.")
+def compare_command(source, models, solvers, losses, out, force) -> int:
+    """Fit every model x solver x loss; table of errors and times, and a Pareto plot."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from .. import load
+    from .. import models as _models
+    from .._files import atomic_dir, check_target
+    from ..fitting.compare import compare
+    from ..fitting.losses import check_loss
+    from ..fitting.problem import resolve_model
+    from ..fitting.solve import check_solver
+
+    models = _split(models) or _models.names()
+    solvers = [check_solver(s) for s in (_split(solvers) or ["lm", "dogleg", "bfgs", "scipy"])]
+    losses = [check_loss(x) for x in (_split(losses) or ["log"])]
+    for name in models:
+        resolve_model(name, 3)
+    console = Console(stderr=True)
+    with console.status(f"loading {source}"):
+        m = load(source)
+    out = out or Path(f"compare-{m.name}")
+    check_target(out, force)
+    total = len(models) * len(solvers) * len(losses)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=console) as progress:
+        task = progress.add_task("fitting", total=total)
+        state = {"n": 0}
+
+        def step(label):
+            if state["n"]:
+                progress.advance(task)
+            state["n"] += 1
+            progress.update(task, description=f"fitting {label}")
+
+        report = compare(m, models, solvers, losses, progress=step)
+        progress.update(task, completed=total, description="done")
+    with atomic_dir(out, force) as tmp:
+        report.to_csv(tmp / "report.csv")
+        report.to_json(tmp / "report.json")
+        report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
+    table = Table(title=f"{m.name}: error against run time")
+    for col in ("model", "solver", "loss", "params", f"{losses[0]} loss", "run s", "compile s", "steps", "status"):
+        table.add_column(col)
+    for r in sorted(report.rows, key=lambda r: r[f"loss_{losses[0]}"]):
+        table.add_row(r["model"], r["solver"], r["loss"], str(r["n_params"]), f"{r[f'loss_{losses[0]}']:.4g}",
+                      f"{r['run_s']:.3f}", f"{r['compile_s']:.2f}", str(r["steps"]),
+                      "ok" if r["converged"] else f"[red]{r['status']}[/]")
+    Console().print(table)
+    console.print(f"wrote {out}/report.csv, {out}/report.json, {out}/pareto.png")
+    return EXIT_OK if all(r["converged"] for r in report.rows) else EXIT_NOT_CONVERGED
