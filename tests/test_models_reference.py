@@ -207,6 +207,14 @@ def _mitsuba_eval_over_cos(bsdf_dict, wi, wo):
 
     mi = mitsuba()
     bsdf = mi.load_dict(bsdf_dict)
+    if mi.variant().startswith("scalar"):  # no usable libLLVM: one pair at a time
+        out = []
+        for a, b in zip(wi, wo):
+            si = mi.SurfaceInteraction3f()
+            si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
+            si.wi = mi.Vector3f(*map(float, b.astype(np.float32)))
+            out.append(np.asarray(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*map(float, a.astype(np.float32))))))
+        return np.asarray(out, dtype=np.float64).reshape(len(wi), 3) / wi[:, 2:3].astype(np.float32).astype(np.float64)
     si = mi.SurfaceInteraction3f()
     si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
     si.wi = mi.Vector3f(np.ascontiguousarray(wo.T, dtype=np.float32))
