@@ -111,8 +111,9 @@ def save(m: Measurement, path: str | os.PathLike, *, force: bool = False) -> Pat
 
 
 def resample(source, grid: str = "ubo81", **options) -> Measurement:
-    """A UBO-81 measurement from a Measurement or a path (see :mod:`brdffit.io.resample`)."""
-    from .resample import resample as _resample
+    """A UBO-81 measurement from a Measurement or a path (see :mod:`brdffit.io.resampling`)."""
+    # (the module is not called ``resample``: importing it would shadow this function)
+    from .resampling import resample as _resample
 
     return _resample(source, grid=grid, **options)
 

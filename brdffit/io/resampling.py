@@ -65,9 +65,12 @@ def interpolate_scattered(m: Measurement, *, reciprocal: bool = True) -> Measure
     counts = np.bincount(inverse)
     y_mean = np.stack([np.bincount(inverse, weights=y[:, c]) for c in range(y.shape[1])], axis=1) / counts[:, None]
     wi, wo = ubo_pairs()
-    q = isotropic_coords(wi, wo)
-    values = LinearNDInterpolator(uniq, y_mean)(q)
-    dist, nearest = cKDTree(uniq).query(q)
+    # many UBO pairs share their isotropic coordinates: interpolate each distinct point once
+    q_all = isotropic_coords(wi, wo)
+    q, q_inverse = np.unique(np.round(q_all, 12), axis=0, return_inverse=True)
+    q_inverse = q_inverse.reshape(-1)
+    values = LinearNDInterpolator(uniq, y_mean)(q)[q_inverse]
+    dist, nearest = (a[q_inverse] for a in cKDTree(uniq).query(q))
     outside = ~np.all(np.isfinite(values), axis=1)
     values[outside] = y_mean[nearest[outside]]
     weights = np.where(outside, 1.0 / (1.0 + (dist / WEIGHT_SCALE) ** 2), 1.0)
@@ -112,4 +115,4 @@ def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, **options)
     return interpolate_scattered(m, reciprocal=reciprocal)
 
 
-__all__ = ["isotropic_coords", "interpolate_scattered", "resample", "Path"]
+__all__ = ["isotropic_coords", "interpolate_scattered", "resample"]
