@@ -15,21 +15,28 @@ def _fmt(x: float) -> str:
 @click.argument("source", type=click.Path(path_type=str))
 def info(source: str) -> int:
     """Show format, samples, grid, channels, value ranges, invalid samples and direction coverage."""
+    from ..io import detect_format, load
+
+    fmt = detect_format(source)
+    print_info(load(source), fmt, str(source))
+    return 0
+
+
+def print_info(m, fmt: str, source: str, console=None) -> None:
+    """Print what ``brdffit info`` shows for a loaded measurement."""
     from rich.console import Console
     from rich.table import Table
 
-    from ..io import detect_format, load, summary
+    from ..io import summary
 
-    fmt = detect_format(source)
-    m = load(source)
     s = summary(m)
-    console = Console()
+    console = console or Console()
     head = Table(show_header=False, box=None, pad_edge=False)
     head.add_column(style="bold")
     head.add_column()
     origin = s["format"]
     head.add_row("source", str(source))
-    head.add_row("format", fmt if origin in (fmt, "?") else f"{fmt} (converted from {origin})")
+    head.add_row("format", fmt if origin in (fmt, "?") else f"{fmt} (origin: {origin})")
     head.add_row("name", s["name"])
     head.add_row("samples", str(s["samples"]))
     head.add_row("grid", str(s["grid"] or "scattered"))
@@ -50,4 +57,3 @@ def info(source: str) -> int:
     for r in s["ranges"]:
         ranges.add_row(r["channel"], _fmt(r["min"]), _fmt(r["max"]), _fmt(r["mean"]), str(r["negative"]))
     console.print(ranges)
-    return 0

@@ -75,10 +75,10 @@ def meta_from_json(text: str) -> dict:
     return out
 
 
-def readable_mode(path) -> None:
-    """Give a freshly written temporary file the usual permissions (mkstemp makes it 0600)."""
+def readable_mode(path, folder: bool = False) -> None:
+    """Give a fresh temporary file or folder the usual permissions (mkstemp/mkdtemp make them 0600/0700)."""
     import os
 
     umask = os.umask(0)
     os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
+    os.chmod(path, (0o777 if folder else 0o666) & ~umask)
