@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -60,7 +61,15 @@ def model_brdf(model, params) -> BrdfFn:
     def f(wi, wo):
         return model.eval(params, wi, wo)
 
+    # Compile for the CHUNK shape in a background thread now: XLA compiles without the GIL, so this
+    # overlaps with whatever comes next (in a validation: rendering the reference).
+    pole = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
+    warm = threading.Thread(target=lambda: f(pole, pole).block_until_ready(), name="brdffit-jit", daemon=True)
+    warm.start()
+
     def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        if warm.is_alive():
+            warm.join()  # one compilation, not two racing ones
         wi = np.asarray(wi, np.float64).reshape(-1, 3)
         wo = np.asarray(wo, np.float64).reshape(-1, 3)
         n = wi.shape[0]
@@ -267,7 +276,7 @@ def as_source(obj) -> Source:
         return obj
     if hasattr(obj, "model") and hasattr(obj, "params"):  # a FitResult (duck-typed)
         model = models.get(obj.model)
-        label = f"fit: {model.name}"
+        label = model.name
         return Source("model", label, model_brdf(model, obj.params))
     if isinstance(obj, tuple) and len(obj) == 2:
         model = models.get(obj[0])

@@ -15,6 +15,21 @@ from ..grid import UBO_THETA_DEG, ubo_angles_deg
 from .metrics import luminance, tonemap
 
 
+def preload() -> None:
+    """Import matplotlib (and FLIP) in a background thread while Mitsuba renders: the import costs
+    about half a second that would otherwise be spent after the renders."""
+    import threading
+
+    def work():
+        try:
+            _plt()
+            import flip_evaluator  # noqa: F401
+        except Exception:  # noqa: BLE001 - the real import reports any problem later
+            pass
+
+    threading.Thread(target=work, name="brdffit-preload", daemon=True).start()
+
+
 def _plt():
     import matplotlib
 
@@ -37,48 +52,70 @@ def light_label(d: np.ndarray) -> str:
     return f"light θ = {theta:.0f}°, φ = {phi:.0f}°" if theta > 0.5 else "light θ = 0° (from the camera)"
 
 
-def sphere_panel(
-    path: Path,
-    reference: np.ndarray,
-    fit: np.ndarray,
-    scale: float,
-    light: np.ndarray,
-    metrics: dict,
-    ref_label: str,
-    fit_label: str,
-) -> None:
-    """One light: reference | fit | signed luminance error with a colour bar."""
-    plt = _plt()
-    fig, axes = plt.subplots(1, 3, figsize=(11.0, 4.0), gridspec_kw={"width_ratios": [1, 1, 1.22]})
-    for ax, img, title in ((axes[0], reference, f"reference\n{ref_label}"), (axes[1], fit, f"fit\n{fit_label}")):
-        ax.imshow(tonemap(img, scale), interpolation="nearest")
-        ax.set_title(title, fontsize=10)
-    d = luminance(fit) - luminance(reference)
-    lim = _limit(d)
-    im = axes[2].imshow(d, cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
-    axes[2].set_title("error: fit − reference\n(luminance)", fontsize=10)
-    cb = fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04)
-    cb.set_label("radiance difference (per unit irradiance)", fontsize=8)
-    for ax in axes:
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.suptitle(
-        f"{light_label(light)}    RMSE {metrics['rmse']:.3g}   rel. RMSE {metrics['relative_rmse']:.3g}   "
-        f"PSNR {metrics['psnr']:.1f} dB   FLIP {metrics['flip']:.3f}",
-        fontsize=11,
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+class SpherePanels:
+    """Writes the per-light panels: reference | fit | signed luminance error with a colour bar.
+
+    One figure is laid out once and its images, limits and titles are updated for each light:
+    building a figure (axes, colour bar, layout) costs more than drawing it.
+    """
+
+    def __init__(self, size: int, ref_label: str, fit_label: str):
+        plt = _plt()
+        self.plt = plt
+        fig = plt.figure(figsize=(11.0, 4.1))
+        # fixed layout (no tight_layout: it draws the figure once more)
+        left, width, gap, top, height = 0.015, 0.27, 0.02, 0.83, 0.76
+        axes = [fig.add_axes((left + k * (width + gap), top - height, width, height)) for k in range(3)]
+        cax = fig.add_axes((left + 3 * width + 2 * gap + 0.01, top - height, 0.012, height))
+        blank = np.zeros((size, size, 3))
+        self.im_ref = axes[0].imshow(blank, interpolation="nearest")
+        self.im_fit = axes[1].imshow(blank, interpolation="nearest")
+        self.im_err = axes[2].imshow(blank[..., 0], cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest")
+        axes[0].set_title(f"reference: {ref_label}", fontsize=10)
+        axes[1].set_title(f"fit: {fit_label}", fontsize=10)
+        axes[2].set_title("error: fit − reference (luminance)\nred: fit too bright, blue: too dark", fontsize=9)
+        # the sphere's outline on the error map, where the background is white like zero error
+        t = np.linspace(0, 2 * np.pi, 256)
+        c = (size - 1) / 2
+        axes[2].plot(c + size / 2 * np.cos(t), c + size / 2 * np.sin(t), color="0.6", lw=0.6)
+        axes[2].set_xlim(-0.5, size - 0.5)
+        axes[2].set_ylim(size - 0.5, -0.5)
+        for ax in axes:
+            ax.set_xticks([])
+            ax.set_yticks([])
+        cb = fig.colorbar(self.im_err, cax=cax)
+        cb.set_label("radiance difference (irradiance 1)", fontsize=8)
+        cb.ax.tick_params(labelsize=8)
+        self.title = fig.suptitle("", fontsize=11, y=0.975)
+        self.fig = fig
+
+    def write(self, path: Path, reference: np.ndarray, fit: np.ndarray, scale: float, light: np.ndarray, metrics: dict):
+        self.im_ref.set_data(tonemap(reference, scale))
+        self.im_fit.set_data(tonemap(fit, scale))
+        d = luminance(fit) - luminance(reference)
+        lim = _limit(d)
+        self.im_err.set_data(d)
+        self.im_err.set_clim(-lim, lim)
+        self.title.set_text(
+            f"{light_label(light)}    RMSE {metrics['rmse']:.3g}   rel. RMSE {metrics['relative_rmse']:.3g}   "
+            f"PSNR {metrics['psnr']:.1f} dB   FLIP {metrics['flip']:.3f}"
+        )
+        self.fig.savefig(path, dpi=90, pil_kwargs={"compress_level": 1})
+
+    def close(self):
+        self.plt.close(self.fig)
 
 
 def _ring_ticks(ax) -> None:
     """Ticks at the first direction of each theta ring of the UBO-81 ordering."""
     angles = ubo_angles_deg()
     starts = [int(np.argmax(angles[:, 0] == t)) for t in UBO_THETA_DEG]
-    labels = [f"{t}°" for t in UBO_THETA_DEG]
-    ax.set_xticks(starts, labels, fontsize=7)
-    ax.set_yticks(starts, labels, fontsize=7)
+    ends = starts[1:] + [len(angles)]
+    # label each ring (from 15 degrees: the pole is a single row) at its middle, lines between rings
+    centres = [(a + b - 1) / 2 for a, b in zip(starts[1:], ends[1:])]
+    labels = [f"{t}°" for t in UBO_THETA_DEG[1:]]
+    ax.set_xticks(centres, labels, fontsize=7)
+    ax.set_yticks(centres, labels, fontsize=7)
     for s in starts[1:]:
         ax.axhline(s - 0.5, color="white", lw=0.3, alpha=0.5)
         ax.axvline(s - 0.5, color="white", lw=0.3, alpha=0.5)
@@ -108,13 +145,13 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
     cb.set_label("f_r cos θ_light difference (1/sr)", fontsize=8)
     for ax in axes:
         _ring_ticks(ax)
-        ax.set_xlabel("view direction (θ rings, φ within)", fontsize=8)
-        ax.set_ylabel("light direction", fontsize=8)
+        ax.set_xlabel("view θ ring (φ increasing within)", fontsize=8)
+        ax.set_ylabel("light θ ring", fontsize=8)
     fig.suptitle(
         f"UBO-81 table (81 light × 81 view directions)    RMSE {metrics['rmse']:.3g} 1/sr   "
         f"rel. RMSE {metrics['relative_rmse']:.3g}   log-RMSE {metrics['log_rmse']:.3g}",
         fontsize=11,
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    fig.subplots_adjust(left=0.05, right=0.94, bottom=0.12, top=0.8, wspace=0.25)
+    fig.savefig(path, dpi=90, pil_kwargs={"compress_level": 1})
     plt.close(fig)

@@ -13,6 +13,7 @@ Written files (in ``out``, atomically: the folder appears complete or not at all
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import time
@@ -89,7 +90,8 @@ def _tag(d: np.ndarray) -> str:
 def _write_exr(path: Path, img: np.ndarray) -> None:
     import OpenEXR
 
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    # RLE: lossless, fast, and the black background around the sphere packs well
+    header = {"compression": OpenEXR.RLE_COMPRESSION, "type": OpenEXR.scanlineimage}
     with OpenEXR.File(header, {"RGB": np.ascontiguousarray(img, dtype=np.float32)}) as f:
         f.write(str(path))
 
@@ -131,6 +133,9 @@ def validate(
         from .._files import check_target
 
         check_target(out, force)  # fail before the work, not after it
+        from .panels import preload
+
+        preload()
     ref_src = as_source(source)
     fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
@@ -143,65 +148,72 @@ def validate(
                              progress=lambda k, n: tell("render fit", k, n))
     lap("render fit")
 
+    from concurrent.futures import ThreadPoolExecutor
+
     from .metrics import exposure, image_metrics, summarise, table_metrics
 
-    tab_ref, valid_ref = _table(ref_src)
-    tab_fit, _ = _table(fit_src)
-    lap("tables")
+    # FLIP and NumPy release the GIL: the per-light metrics run in two threads while this thread
+    # evaluates the tables, writes the EXRs and draws the panels (which wait for their metrics).
     mask = disc_mask(int(size))
-    per_light, scales = [], []
-    for k, d in enumerate(dirs):
-        scale = exposure(ref_imgs[k], mask)
-        m = image_metrics(ref_imgs[k], fit_imgs[k], mask, scale)
-        theta, phi = np.degrees(np.arccos(np.clip(d[2], -1, 1))), np.degrees(np.arctan2(d[1], d[0])) % 360
-        per_light.append({"light": [float(x) for x in d], "theta_deg": float(theta), "phi_deg": float(phi), **m})
-        scales.append(scale)
-        tell("metrics", k + 1, len(dirs))
-    overall = summarise(per_light, ref_imgs, fit_imgs, mask)
-    valid3 = np.broadcast_to(valid_ref[..., None], tab_ref.shape)
-    table = table_metrics(tab_ref, tab_fit, valid3)
-    public = [{k: v for k, v in p.items() if not k.startswith("_")} for p in per_light]
-    metrics = {
-        "reference": ref_src.label,
-        "fit": fit_src.label,
-        "size": int(size),
-        "spp": int(spp),
-        "irradiance": float(irradiance),
-        "lights": public,
-        "overall": overall,
-        "table": table,
-    }
-    lap("metrics")
-
-    files: list[Path] = []
-    if out is not None:
-        from .panels import sphere_panel, table_panel
-
-        out = Path(out)
-        with atomic_dir(out, force=force) as tmp:
+    scales = [exposure(ref_imgs[k], mask) for k in range(len(dirs))]
+    with contextlib.ExitStack() as stack:
+        pool = stack.enter_context(ThreadPoolExecutor(2))
+        futures = [pool.submit(image_metrics, ref_imgs[k], fit_imgs[k], mask, scales[k]) for k in range(len(dirs))]
+        tab_ref, valid_ref = _table(ref_src)
+        tab_fit, _ = _table(fit_src)
+        valid3 = np.broadcast_to(valid_ref[..., None], tab_ref.shape)
+        table = table_metrics(tab_ref, tab_fit, valid3)
+        lap("tables")
+        # the folder appears complete or not at all: atomic_dir renames it on success only
+        tmp = stack.enter_context(atomic_dir(Path(out), force=force)) if out is not None else None
+        files: list[Path] = []
+        if tmp is not None:
             for k, d in enumerate(dirs):
                 tag = _tag(d)
                 _write_exr(tmp / f"reference_{tag}.exr", ref_imgs[k])
                 _write_exr(tmp / f"fit_{tag}.exr", fit_imgs[k])
-                files += [out / f"reference_{tag}.exr", out / f"fit_{tag}.exr"]
+                files += [Path(out) / f"reference_{tag}.exr", Path(out) / f"fit_{tag}.exr"]
             _write_exr(tmp / "table_reference.exr", tab_ref)
             _write_exr(tmp / "table_fit.exr", tab_fit)
-            files += [out / "table_reference.exr", out / "table_fit.exr"]
+            files += [Path(out) / "table_reference.exr", Path(out) / "table_fit.exr"]
             lap("write exr")
-            for k, d in enumerate(dirs):
+            from .panels import SpherePanels, table_panel
+
+            panels = SpherePanels(int(size), ref_src.label, fit_src.label)
+        per_light = []
+        for k, d in enumerate(dirs):
+            m = futures[k].result()
+            theta = np.degrees(np.arccos(np.clip(d[2], -1, 1)))
+            phi = np.degrees(np.arctan2(d[1], d[0])) % 360
+            per_light.append({"light": [float(x) for x in d], "theta_deg": float(theta), "phi_deg": float(phi), **m})
+            tell("metrics", k + 1, len(dirs))
+            if tmp is not None:
                 tag = _tag(d)
-                sphere_panel(tmp / f"panel_{tag}.png", ref_imgs[k], fit_imgs[k], scales[k], d, per_light[k],
-                             ref_src.label, fit_src.label)
-                files.append(out / f"panel_{tag}.png")
+                panels.write(tmp / f"panel_{tag}.png", ref_imgs[k], fit_imgs[k], scales[k], d, per_light[k])
+                files.append(Path(out) / f"panel_{tag}.png")
                 tell("panels", k + 1, len(dirs) + 1)
+        overall = summarise(per_light, ref_imgs, fit_imgs, mask)
+        public = [{k: v for k, v in p.items() if not k.startswith("_")} for p in per_light]
+        metrics = {
+            "reference": ref_src.label,
+            "fit": fit_src.label,
+            "size": int(size),
+            "spp": int(spp),
+            "irradiance": float(irradiance),
+            "lights": public,
+            "overall": overall,
+            "table": table,
+        }
+        if tmp is not None:
+            panels.close()
             table_panel(tmp / "table.png", tab_ref, tab_fit, ref_src.label, fit_src.label, table)
-            files.append(out / "table.png")
+            files.append(Path(out) / "table.png")
             tell("panels", len(dirs) + 1, len(dirs) + 1)
-            lap("write panels")
+            lap("metrics and panels")
             metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
             (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True) + "\n")
-            files.append(out / "metrics.json")
-        lap("write metrics")
+            files.append(Path(out) / "metrics.json")
+    lap("metrics and panels" if out is not None else "metrics")
     metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
     return Validation(
         lights=dirs,
