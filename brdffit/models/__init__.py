@@ -74,4 +74,11 @@ def get(name: str | Model, *, lobes: int | None = None) -> Model:
     return _get(key)
 
 
-__all__ = ["Model", "Param", "get", "names"]
+def compose(components):
+    """The sum of models (names or Models), named by the scheme of ``brdffit.models.compose``."""
+    from .compose import compose as _compose
+
+    return _compose([get(c) for c in components])
+
+
+__all__ = ["Model", "Param", "compose", "get", "names"]
