@@ -74,11 +74,6 @@ def get(name: str | Model, *, lobes: int | None = None) -> Model:
     return _get(key)
 
 
-def compose(components):
-    """The sum of models (names or Models), named by the scheme of ``brdffit.models.compose``."""
-    from .compose import compose as _compose
-
-    return _compose([get(c) for c in components])
-
-
-__all__ = ["Model", "Param", "compose", "get", "names"]
+# Sums of Model objects: ``brdffit.models.compose.compose([m1, m2])`` (a function of the same name
+# here would be shadowed by the submodule as soon as it is imported).
+__all__ = ["Model", "Param", "get", "names"]
