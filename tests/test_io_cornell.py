@@ -67,3 +67,12 @@ def test_cornell_wrong_column_count(tmp_path):
     write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + [0.2] * 30])
     with pytest.raises(InputError, match="not a multiple of 35"):
         brdffit.load(p)
+
+
+def test_format_override(tmp_path):
+    p = tmp_path / "cornell.txt"
+    write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + [0.2] * 31])
+    m = brdffit.load(p, format="cornell")
+    assert m.n_samples == 1 and m.meta["format"] == "cornell"
+    with pytest.raises(InputError, match="unknown format"):
+        brdffit.load(p)

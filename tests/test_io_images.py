@@ -114,3 +114,31 @@ def test_missing_duplicate_offgrid_named(tmp_path):
     Image.fromarray(table[0, 0][None, None]).save(root / "photo.png")
     with pytest.raises(InputError, match="photo.png: unparsable image name"):
         brdffit.load(root)
+
+
+def test_read_image_kinds(tmp_path):
+    from brdffit.io.images import read_image
+
+    grey = np.array([[0, 128], [255, 64]], np.uint8)
+    Image.fromarray(grey, "L").save(tmp_path / "g.png")
+    np.testing.assert_allclose(read_image(tmp_path / "g.png")[..., 0], srgb_to_linear(grey / 255.0))
+    sixteen = np.array([[0, 30000], [65535, 1000]], np.uint16)
+    Image.fromarray(sixteen).save(tmp_path / "s.png")
+    np.testing.assert_allclose(read_image(tmp_path / "s.png")[..., 0], srgb_to_linear(sixteen / 65535.0))
+    np.testing.assert_allclose(read_image(tmp_path / "s.png", srgb=False)[..., 0], sixteen / 65535.0)
+    rgb = np.full((8, 8, 3), (200, 100, 50), np.uint8)
+    Image.fromarray(rgb).save(tmp_path / "c.jpg", quality=95)
+    np.testing.assert_allclose(read_image(tmp_path / "c.jpg").mean(axis=(0, 1)), srgb_to_linear(np.array([200, 100, 50]) / 255), atol=0.01)
+
+
+def test_option_errors(tmp_path):
+    from brdffit.errors import UsageError
+
+    root = tmp_path / "o"
+    root.mkdir()
+    with pytest.raises(UsageError, match="region"):
+        brdffit.load(root, region=(0, 1))
+    p = tmp_path / "x.npz"
+    brdffit.save(brdffit.Measurement(wi=[[0, 0, 1.0]], wo=[[0, 0, 1.0]], values=[[1.0]]), p)
+    with pytest.raises(UsageError, match="unexpected keyword"):
+        brdffit.load(p, region=(0, 1, 0, 1))
