@@ -113,3 +113,16 @@ def test_cli_bad_input(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "fit.json" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_invalid_table_entries_are_left_out(tmp_path):
+    m = ggx_measurement()
+    weights = np.ones(6561)
+    weights[:81] = 0  # light at the pole: all invalid
+    values = np.asarray(m.values).copy()
+    values[:81] = 1e6  # garbage that must not count
+    m = m.replace(weights=weights, values=values)
+    v = validate(m, ("ggx", GGX), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
+    assert v.metrics["table"]["valid_pairs"] == 6561 - 81
+    assert v.metrics["table"]["rmse"] < 1e-9
+    assert np.all(np.isnan(v.table_reference[0])) and np.all(np.isfinite(v.table_reference[1:]))

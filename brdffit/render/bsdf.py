@@ -241,11 +241,15 @@ class Source:
     file (other measurement files are read with ``brdffit.load``).
     """
 
-    def __init__(self, kind: str, label: str, brdf: BrdfFn | None = None, path: Path | None = None):
+    def __init__(
+        self, kind: str, label: str, brdf: BrdfFn | None = None, path: Path | None = None, valid: np.ndarray | None = None
+    ):
         self.kind = kind  # "model" | "table" | "rgl"
         self.label = label
         self._brdf = brdf
         self.path = path
+        #: (81, 81) bool: the measured UBO entries that are valid (a table source), else None
+        self.valid = valid
         self._bsdf = None
 
     @property
@@ -293,7 +297,8 @@ def as_source(obj) -> Source:
             out = interp(wi, wo)
             return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out
 
-        return Source("table", obj.name, brdf)
+        valid = (np.asarray(obj.weights) > 0) & np.all(np.isfinite(np.asarray(obj.values)), axis=1)
+        return Source("table", obj.name, brdf, valid=valid.reshape(81, 81))
     if isinstance(obj, (str, Path)):
         path = Path(obj)
         if not path.exists():

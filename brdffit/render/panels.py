@@ -59,7 +59,7 @@ class SpherePanels:
     building a figure (axes, colour bar, layout) costs more than drawing it.
     """
 
-    def __init__(self, size: int, ref_label: str, fit_label: str):
+    def __init__(self, size: int, ref_label: str, fit_label: str, irradiance: float = 1.0):
         plt = _plt()
         self.plt = plt
         fig = plt.figure(figsize=(11.0, 4.1))
@@ -78,13 +78,18 @@ class SpherePanels:
         t = np.linspace(0, 2 * np.pi, 256)
         c = (size - 1) / 2
         axes[2].plot(c + size / 2 * np.cos(t), c + size / 2 * np.sin(t), color="0.6", lw=0.6)
+        # where the light direction projects onto the image (the normal facing the light)
+        (self.light_dot,) = axes[2].plot([], [], "o", ms=7, mfc="gold", mec="black", mew=0.8)
+        axes[2].legend([self.light_dot], ["light direction, projected"], loc="lower right", fontsize=7,
+                       frameon=False, handletextpad=0.2, borderaxespad=0.1)
         axes[2].set_xlim(-0.5, size - 0.5)
         axes[2].set_ylim(size - 0.5, -0.5)
+        self.size = size
         for ax in axes:
             ax.set_xticks([])
             ax.set_yticks([])
         cb = fig.colorbar(self.im_err, cax=cax)
-        cb.set_label("radiance difference (irradiance 1)", fontsize=8)
+        cb.set_label(f"radiance difference (irradiance {irradiance:g})", fontsize=8)
         cb.ax.tick_params(labelsize=8)
         self.title = fig.suptitle("", fontsize=11, y=0.975)
         self.fig = fig
@@ -96,6 +101,9 @@ class SpherePanels:
         lim = _limit(d)
         self.im_err.set_data(d)
         self.im_err.set_clim(-lim, lim)
+        # pixel coordinates of world (x, y) = the light direction's projection (SPEC 6 framing)
+        n = self.size
+        self.light_dot.set_data([(light[0] + 1) * n / 2 - 0.5], [(1 - light[1]) * n / 2 - 0.5])
         self.title.set_text(
             f"{light_label(light)}    RMSE {metrics['rmse']:.3g}   rel. RMSE {metrics['relative_rmse']:.3g}   "
             f"PSNR {metrics['psnr']:.1f} dB   FLIP {metrics['flip']:.3f}"
@@ -128,7 +136,9 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
     from ..grid import ubo_directions
 
     cos_l = np.maximum(ubo_directions()[:, 2], 0.0)[:, None, None]
-    ref = np.nan_to_num(np.asarray(reference, np.float64)) * cos_l
+    # invalid measured entries are NaN: black in the table, blank (no error shown) in the error map
+    ref_raw = np.asarray(reference, np.float64) * cos_l
+    ref = np.nan_to_num(ref_raw)
     fit = np.nan_to_num(np.asarray(fit, np.float64)) * cos_l
     from .metrics import exposure
 
@@ -137,7 +147,7 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
     for ax, img, title in ((axes[0], ref, f"measured\n{ref_label}"), (axes[1], fit, f"fitted\n{fit_label}")):
         ax.imshow(tonemap(img, scale), interpolation="nearest")
         ax.set_title(title, fontsize=10)
-    d = luminance(fit) - luminance(ref)
+    d = luminance(fit) - luminance(ref_raw)
     lim = _limit(d)
     im = axes[2].imshow(d, cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
     axes[2].set_title("error: fitted − measured\n(luminance of f_r cos θ_light)", fontsize=10)

@@ -121,6 +121,10 @@ def render_sphere(
     RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the
     lights (L, 3), or (theta, phi) pairs in radians (L, 2). ``irradiance``: on a surface facing the
     light. ``spp``: stratified samples per pixel. ``progress(k, L)`` is called after each image.
+
+    An isotropic BRDF renders f_r(l, v) (n.l) irradiance with n = (x, y, sqrt(1 - x^2 - y^2)),
+    v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,
+    pointing right at the image centre; see the module docstring).
     """
     mi = mitsuba()
     src: Source = as_source(source)

@@ -6,7 +6,8 @@ Written files (in ``out``, atomically: the folder appears complete or not at all
   light in integer degrees), 32-bit float RGB OpenEXR.
 - ``panel_tTT_pPPP.png``: reference | fit | error heat map with a colour bar, per light.
 - ``table.png``: the 81x81 UBO tables, measured | fitted | error; ``table_reference.exr`` and
-  ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr).
+  ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr; entries a measured
+  table marks invalid are NaN in the reference table and left out of the table metrics).
 - ``metrics.json``: rmse, relative_rmse, psnr, flip per light and overall (see
   :mod:`brdffit.render.metrics`), the table metrics, the settings and where the time went.
 """
@@ -73,11 +74,15 @@ def as_fit(fit) -> Source:
     return as_source(fit)
 
 
-def _table(src: Source, m=None) -> tuple[np.ndarray, np.ndarray]:
-    """(81, 81, 3) f_r of a source on the UBO-81 pairs, and the valid mask (81, 81)."""
+def _table(src: Source) -> tuple[np.ndarray, np.ndarray]:
+    """(81, 81, 3) f_r of a source on the UBO-81 pairs, and the valid mask (81, 81): finite, and
+    for a measured table its valid samples only (the interpolator fills the others)."""
     wi, wo = ubo_pairs()
-    values = src.brdf(wi, wo).reshape(81, 81, 3)
+    values = np.array(src.brdf(wi, wo)).reshape(81, 81, 3)
     valid = np.all(np.isfinite(values), axis=-1)
+    if src.valid is not None:
+        valid &= src.valid
+        values[~valid] = np.nan  # shown as missing, not as interpolated data
     return values, valid
 
 
@@ -179,7 +184,7 @@ def validate(
             lap("write exr")
             from .panels import SpherePanels, table_panel
 
-            panels = SpherePanels(int(size), ref_src.label, fit_src.label)
+            panels = SpherePanels(int(size), ref_src.label, fit_src.label, irradiance)
         per_light = []
         for k, d in enumerate(dirs):
             m = futures[k].result()
