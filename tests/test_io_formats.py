@@ -135,3 +135,25 @@ def test_load_errors_name_the_file(tmp_path):
     with pytest.raises(InputError, match="unknown format") as e:
         brdffit.load(p)
     assert str(p) in str(e.value)
+
+
+@pytest.mark.skipif(not (RGL_FILES and CORNELL_FILES), reason="real measurements not found")
+def test_resample_accuracy_on_known_brdf():
+    """RGL data sampled at the Cornell directions, resampled onto UBO-81, against RGL evaluated there.
+
+    Measured (log1p RMSE over all 6561 samples): paper 0.021, colodur 0.032, golden yellow 0.061,
+    ibiza 0.068 with isotropic coordinates + reciprocity; 0.033 / 0.041 / 0.142 / 0.167 with
+    Rusinkiewicz half/diff coordinates — hence the isotropic choice.
+    """
+    c = brdffit.load(CORNELL_FILES[0])
+    for path in (p for p in RGL_FILES if "paper" in p.stem or "ibiza" in p.stem):
+        ref = np.asarray(brdffit.load(path).values)
+        r = brdffit.resample(brdffit.load(path, wi=c.wi, wo=c.wo))
+        v = np.asarray(r.values)
+        inside = np.asarray(r.weights) == 1.0
+
+        def log_rmse(mask):
+            return np.sqrt(np.mean((np.log1p(np.maximum(v[mask], 0)) - np.log1p(np.maximum(ref[mask], 0))) ** 2))
+
+        assert log_rmse(np.ones(6561, bool)) < 0.08, path.stem
+        assert log_rmse(inside) < 0.02, path.stem
