@@ -9,24 +9,11 @@ forward-mode Jacobians, float64) -> ``FitResult`` with metrics and standard erro
 from __future__ import annotations
 
 from .api import fit
+from .batch import fit_batch
+from .compare import Report, compare
 from .losses import LOSSES
 from .result import FitResult
+from .select import Selection, select
 from .solve import SOLVERS
 
-__all__ = ["LOSSES", "SOLVERS", "FitResult", "Report", "compare", "fit", "fit_batch", "select"]
-
-
-def __getattr__(name):
-    if name == "fit_batch":
-        from .batch import fit_batch
-
-        return fit_batch
-    if name in ("compare", "Report"):
-        from . import compare as _c
-
-        return getattr(_c, name)
-    if name == "select":
-        from .select import select
-
-        return select
-    raise AttributeError(name)
+__all__ = ["LOSSES", "SOLVERS", "FitResult", "Report", "Selection", "compare", "fit", "fit_batch", "select"]

@@ -115,7 +115,8 @@ def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol,
     value, code = None, 1
     jac = _jacobian_fn(m, loss)
     res = flat_residual(m, loss)
-    round_steps = min(ROUND_STEPS, max_steps)
+    # BFGS builds its Hessian estimate over the iterations: a restart would throw it away.
+    round_steps = max_steps if solver == "bfgs" else min(ROUND_STEPS, max_steps)
     while True:
         g = np.asarray(jac(jnp.asarray(v), data)).T @ np.asarray(res(jnp.asarray(v), data))
         d_lo, d_hi = _axis_distance(m, v)

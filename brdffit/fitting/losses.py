@@ -15,7 +15,7 @@ set). ``relative`` is the exception: it divides the difference by the reference,
 
 Measured data can be slightly negative (RGB conversion of spectral data near a specular peak):
 every transform is defined there. ``log`` clamps 1 + f cos at 1e-12 (f cos < -1 is not a
-reflectance); ``cbrt`` is odd and smoothed within 1e-9 of zero, where the plain cube root has an
+reflectance); ``cbrt`` is odd and smoothed within 1e-6 of zero, where the plain cube root has an
 infinite slope that would hand a Gauss-Newton solver an infinite Jacobian.
 """
 
@@ -26,13 +26,13 @@ import jax.numpy as jnp
 LOSSES = ("l2", "cosine_l2", "log", "cbrt", "relative")
 
 #: Smoothing of the cube root at zero (in units of f cos th_i, 1/sr).
-CBRT_EPS = 1e-9
+CBRT_EPS = 1e-6
 
 
 def _cbrt(x):
-    # Odd, C1 at 0: sign(x) ((|x| + eps)^(1/3) - eps^(1/3)); finite derivative everywhere.
-    a = jnp.abs(x)
-    return jnp.sign(x) * (jnp.cbrt(a + CBRT_EPS) - jnp.cbrt(CBRT_EPS))
+    # Odd and smooth: x (x^2 + eps^2)^(-1/3) = sign(x) |x|^(1/3) for |x| >> eps, with the finite
+    # slope eps^(-2/3) at 0 (the plain cube root's slope there is infinite).
+    return x * (x * x + CBRT_EPS**2) ** (-1.0 / 3.0)
 
 
 def check_loss(loss: str) -> str:

@@ -1,0 +1,228 @@
+"""Fitting engine: losses, exclusion counting, JSON round trip, statuses, negative data, compare,
+select, batch. Small problems (a few hundred samples) so that the file runs in well under a minute."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import models
+from brdffit.errors import UsageError
+from brdffit.fitting import LOSSES, FitResult, compare, fit, fit_batch, select
+from brdffit.fitting import losses as L
+from brdffit.grid import spherical_to_cartesian
+
+TRUE = {"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.25], "f0": [0.3]}
+
+
+def _directions(n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    ti, to = rng.uniform(0, 1.3, n), rng.uniform(0, 1.3, n)
+    pi, po = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n)
+    return spherical_to_cartesian(ti, pi), spherical_to_cartesian(to, po)
+
+
+def _measurement(params=TRUE, model="ggx", n=400, noise=0.0, seed=0, **kw):
+    wi, wo = _directions(n, seed)
+    m = models.get(model)
+    f = np.asarray(m.eval(m.check_params(params), wi, wo))
+    if noise:
+        f = f * (1 + noise * np.random.default_rng(seed + 1).standard_normal(f.shape))
+    return brdffit.Measurement(wi, wo, f, name=f"synthetic-{model}", **kw)
+
+
+@pytest.fixture(scope="module")
+def ggx_fit():
+    return fit(_measurement(), "ggx")
+
+
+def test_exact_data_recovers_parameters(ggx_fit):
+    assert ggx_fit.converged, ggx_fit.status
+    for k, v in TRUE.items():
+        np.testing.assert_allclose(ggx_fit.params[k], v, rtol=1e-4)
+    assert ggx_fit.loss_value < 1e-12
+    assert ggx_fit.metrics["rmse"] < 1e-5
+
+
+def test_result_fields(ggx_fit):
+    r = ggx_fit
+    assert r.model_name == "ggx" and r.solver == "lm" and r.loss == "log"
+    assert set(r.params) == {"kd", "ks", "alpha", "f0"}
+    assert {"rmse", "log_rmse", "rel_rmse"} <= set(r.metrics)
+    assert r.seconds["compile"] >= 0 and r.seconds["run"] > 0
+    assert r.n_used == 400 and r.n_excluded == 0
+    assert r.steps >= 1
+    assert r.data_name == "synthetic-ggx"
+
+
+def test_json_round_trip_is_exact(ggx_fit, tmp_path):
+    text = ggx_fit.to_json()
+    d = json.loads(text)
+    assert d["model"] == "ggx" and d["channels"] == 3 and set(d["params"]) == {"kd", "ks", "alpha", "f0"}
+    back = FitResult.from_json(text)
+    for k in ggx_fit.params:
+        assert np.array_equal(back.params[k], ggx_fit.params[k])
+    assert back.loss_value == ggx_fit.loss_value and back.metrics == ggx_fit.metrics
+    assert back.converged == ggx_fit.converged and back.status == ggx_fit.status
+    path = tmp_path / "fit.json"
+    ggx_fit.to_json(path)
+    back2 = FitResult.from_json(path)
+    assert back2.to_json() == text
+    wi, wo = _directions(20, seed=5)
+    np.testing.assert_array_equal(back2.eval(wi, wo), ggx_fit.eval(wi, wo))
+
+
+def test_from_json_bad_input(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(brdffit.InputError, match="bad.json"):
+        FitResult.from_json(bad)
+    bad.write_text(json.dumps({"model": "ggx", "params": {"kd": [1, 2]}}))
+    with pytest.raises(brdffit.InputError):
+        FitResult.from_json(bad)
+
+
+def test_standard_errors_shrink_with_less_noise():
+    a = fit(_measurement(noise=0.02), "ggx")
+    b = fit(_measurement(noise=0.002), "ggx")
+    assert a.stderr["alpha"] is not None and b.stderr["alpha"] is not None
+    assert b.stderr["alpha"][0] < a.stderr["alpha"][0] / 3
+    # The truth lies within a few standard errors.
+    assert abs(a.params["alpha"][0] - 0.25) < 5 * a.stderr["alpha"][0]
+
+
+def test_exclusions_are_counted_and_ignored():
+    m = _measurement()
+    values = np.array(m.values)
+    weights = np.array(m.weights)
+    wi = np.array(m.wi)
+    values[:5] = np.nan
+    values[5:8] = 1e6  # junk, but weight 0
+    weights[5:8] = 0
+    wi[8:10] = [0.6, 0.0, -0.8]  # below the horizon
+    r = fit(m.replace(values=values, weights=weights, wi=wi), "ggx")
+    assert r.n_used == 390 and r.n_excluded == 10
+    assert r.excluded == {"weight 0": 3, "non-finite value": 5, "light below horizon": 2}
+    assert all(np.all(np.isfinite(v)) for v in r.params.values())
+    np.testing.assert_allclose(r.params["alpha"], 0.25, rtol=1e-4)
+
+
+@pytest.mark.parametrize("loss", LOSSES)
+def test_every_loss_fits_noisy_negative_data(loss):
+    # Small additive noise makes some low values negative (as the golden yellow RGL file).
+    m = _measurement({**TRUE, "kd": [0.3, 0.2, 0.01]})
+    v = np.array(m.values) + 0.01 * np.random.default_rng(3).standard_normal(m.values.shape)
+    assert (v < 0).any()
+    r = fit(m.replace(values=v), "ggx", loss=loss)
+    assert r.converged, r.status
+    assert all(np.all(np.isfinite(x)) for x in r.params.values())
+    assert np.isfinite(r.loss_value)
+    if loss != "relative":
+        # (The relative loss divides by |f_ref| + 1 % of its mean: additive noise on near-zero
+        # samples then dominates it by design, so its optimum moves; it only has to stay finite.)
+        np.testing.assert_allclose(r.params["alpha"], 0.25, rtol=0.1)
+
+
+def test_loss_definitions():
+    f = jnp.asarray([[0.5], [2.0]])
+    ref = jnp.asarray([[0.25], [-0.1]])
+    cos = jnp.asarray([[0.5], [1.0]])
+    one = jnp.ones((2, 1))
+    floor = jnp.asarray([0.01])
+    np.testing.assert_allclose(L.residual("l2", f, ref, cos, one, floor), f - ref)
+    np.testing.assert_allclose(L.residual("cosine_l2", f, ref, cos, one, floor), (f - ref) * cos)
+    np.testing.assert_allclose(L.residual("log", f, ref, cos, one, floor), np.log1p(f * cos) - np.log1p(ref * cos))
+    np.testing.assert_allclose(L.residual("relative", f, ref, cos, one, floor), (f - ref) / (np.abs(ref) + 0.01))
+    c = np.asarray(L.residual("cbrt", f, ref, cos, one, floor))
+    np.testing.assert_allclose(c, np.cbrt(f * cos) - np.cbrt(ref * cos), atol=2e-3)
+    # The sign-preserving cube root is odd and has a finite slope at 0.
+    g = jax.grad(lambda x: L._cbrt(x))(0.0)
+    assert np.isfinite(g) and g > 0
+    with pytest.raises(UsageError):
+        L.check_loss("nope")
+
+
+def test_tiny_max_steps_is_a_status_not_an_error():
+    r = fit(_measurement(noise=0.01), "ggx", init="defaults", max_steps=1)
+    assert not r.converged
+    assert "maximum number of steps" in r.status
+    assert all(np.all(np.isfinite(v)) for v in r.params.values())
+    assert r.to_dict()["converged"] is False
+
+
+@pytest.mark.parametrize("solver", ["gauss_newton", "dogleg", "bfgs", "scipy"])
+def test_solvers_agree(ggx_fit, solver):
+    m = _measurement(noise=0.01)
+    ref = fit(m, "ggx")
+    r = fit(m, "ggx", solver=solver)
+    assert r.solver == solver
+    assert r.loss_value <= ref.loss_value * (1 + 1e-3)
+    np.testing.assert_allclose(r.params["alpha"], ref.params["alpha"], rtol=1e-3)
+
+
+def test_optimum_on_a_bound_converges():
+    # ks = 1 and kd = 0 in one channel: the optimum lies on the bounds.
+    truth = {"kd": [0.0, 0.2, 0.1], "ks": [1.0, 0.5, 0.4], "alpha": [0.3], "f0": [0.2]}
+    r = fit(_measurement(truth), "ggx", init={"kd": 0.2, "ks": 0.5, "alpha": 0.3, "f0": 0.05})
+    assert r.converged, r.status
+    np.testing.assert_allclose(r.params["ks"], truth["ks"], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(r.params["kd"], truth["kd"], atol=1e-6)
+    assert r.stderr["ks"] is None  # at a bound: no Gaussian standard error
+
+
+def test_init_options_and_bad_arguments():
+    m = _measurement()
+    r = fit(m, "ggx", init=TRUE)
+    assert r.converged and r.steps <= 5
+    r2 = fit(m, "ggx", multistart=2)
+    np.testing.assert_allclose(r2.params["alpha"], 0.25, rtol=1e-4)
+    for kwargs in ({"loss": "bad"}, {"solver": "bad"}, {"init": "bad"}, {"max_steps": 0}):
+        with pytest.raises(UsageError):
+            fit(m, "ggx", **kwargs)
+    with pytest.raises(UsageError):
+        fit(m, "no_such_model")
+
+
+def test_monochrome_data_fits_a_one_channel_model():
+    m = _measurement()
+    mono = m.replace(values=np.asarray(m.values)[:, :1])
+    r = fit(mono, "ggx")
+    assert r.channels == 1 and r.params["kd"].shape == (1,)
+    np.testing.assert_allclose(r.params["kd"], [0.3], rtol=1e-4)
+
+
+def test_compare_report_and_select(tmp_path):
+    m = _measurement(noise=0.01)
+    rep = compare(m, ["lambert", "ggx"], ["lm", "scipy"], ["log", "l2"])
+    assert len(rep.rows) == 8
+    for row in rep.rows:
+        assert all(f"loss_{k}" in row for k in LOSSES)
+    best = rep.best("loss_log")
+    assert best["model"] == "ggx"
+    csv_text = rep.to_csv(tmp_path / "r.csv")
+    assert csv_text.count("\n") == 9 and csv_text.startswith("model,solver,loss")
+    assert len(json.loads(rep.to_json())["rows"]) == 8
+    png = rep.plot_pareto(tmp_path / "p.png")
+    assert png.stat().st_size > 10_000
+    sel = select(m, rep)
+    assert sel.model_name == "ggx" and "parameters" in sel.reason
+    # With a huge tolerance the simpler model wins, and the reason says why.
+    sel2 = select(m, rep, tolerance=1e6)
+    assert sel2.model_name == "lambert" and "fewest" in sel2.reason
+    assert select(m, rep, criterion="bic").model_name == "ggx"
+
+
+def test_fit_batch_matches_single_fits():
+    ms = [_measurement({**TRUE, "alpha": [a]}, noise=0.005, seed=i) for i, a in enumerate((0.1, 0.25, 0.5))]
+    rs = fit_batch(ms, "ggx", chunk=2)
+    assert [r.data_name for r in rs] == [m.name for m in ms]
+    for r, m, a in zip(rs, ms, (0.1, 0.25, 0.5)):
+        single = fit(m, "ggx")
+        assert r.converged, r.status
+        np.testing.assert_allclose(r.params["alpha"], single.params["alpha"], rtol=1e-3)
+        np.testing.assert_allclose(r.params["alpha"], a, rtol=0.02)
