@@ -22,7 +22,7 @@ def convert(source: str, out: str, force: bool) -> int:
     if Path(out).suffix.lower() not in WRITERS:
         raise UsageError(f"{out}: output must end in .exr or .npz")
     check_target(out, force)  # fail before the (possibly long) read
-    m = resample(source)
+    m = resample(source, progress=True)
     save(m, out, force=force)
     extra = ""
     if "extrapolated" in m.meta:

@@ -18,7 +18,7 @@ def info(source: str) -> int:
     from ..io import detect_format, load
 
     fmt = detect_format(source)
-    print_info(load(source), fmt, str(source))
+    print_info(load(source, progress=True), fmt, str(source))
     return 0
 
 

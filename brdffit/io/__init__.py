@@ -21,6 +21,7 @@ here, so that the CLI can always print one line that names the file (SPEC 7).
 
 from __future__ import annotations
 
+import contextvars
 import importlib
 import os
 from pathlib import Path
@@ -49,6 +50,8 @@ READERS: dict[str, str] = {
     "merl": "brdffit.io.merl",
     "utia": "brdffit.io.utia",
 }
+#: whether readers with long loops (image folders) show a progress bar; set by ``load(progress=True)``
+PROGRESS: contextvars.ContextVar[bool] = contextvars.ContextVar("brdffit_io_progress", default=False)
 #: formats a measurement can be saved in (extension -> writer module)
 WRITERS: dict[str, str] = {".exr": "brdffit.io.exr", ".npz": "brdffit.io.npz"}
 
@@ -71,12 +74,13 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
-def load(path: str | os.PathLike, *, format: str | None = None, **options) -> Measurement:  # noqa: A002
+def load(path: str | os.PathLike, *, format: str | None = None, progress: bool = False, **options) -> Measurement:  # noqa: A002
     """Read any supported source into a :class:`~brdffit.Measurement` (SPEC 1 conventions).
 
     ``format`` overrides the detection; ``options`` go to the reader (see each reader's ``read``):
     e.g. ``region=(r0, r1, c0, c1)``, ``includes_cos=True``, ``scale=`` for image folders, ``wi=, wo=``
     for sources that can be evaluated anywhere (RGL, MERL, UTIA; UBO-81 pairs by default).
+    ``progress=True`` shows a progress bar on a terminal for long reads (image folders).
     """
     path = Path(path)
     fmt = format or detect_format(path)
@@ -85,6 +89,7 @@ def load(path: str | os.PathLike, *, format: str | None = None, **options) -> Me
     if not path.exists():
         raise InputError(path, "no such file or folder")
     reader = importlib.import_module(READERS[fmt])
+    token = PROGRESS.set(bool(progress))
     try:
         m = reader.read(path, **options)
     except InputError:
@@ -97,6 +102,8 @@ def load(path: str | os.PathLike, *, format: str | None = None, **options) -> Me
         raise InputError(path, f"cannot read as {fmt}: out of memory (corrupt size field?)") from exc
     except Exception as exc:  # noqa: BLE001 - any parser failure is a bad input, reported on one line
         raise InputError(path, f"cannot read as {fmt}: {type(exc).__name__}: {_one_line(exc)}") from exc
+    finally:
+        PROGRESS.reset(token)
     return m
 
 

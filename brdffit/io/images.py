@@ -177,6 +177,21 @@ def _mean(f: Path, region, srgb: bool) -> np.ndarray:
     return img.reshape(-1, img.shape[-1]).mean(axis=0)
 
 
+def _with_progress(items, total: int, label: str):
+    """Yield from ``items``, with a transient progress bar when asked (load(progress=True)) on a terminal."""
+    import sys
+
+    from . import PROGRESS
+
+    if not (PROGRESS.get() and sys.stderr.isatty()):
+        yield from items
+        return
+    from rich.console import Console
+    from rich.progress import track
+
+    yield from track(items, total=total, description=label, transient=True, console=Console(stderr=True))
+
+
 def read(
     path,
     *,
@@ -199,7 +214,8 @@ def read(
     files = collect(folder)
     keys = [(i, j) for i in range(UBO_SIZE) for j in range(UBO_SIZE)]
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:  # decoders release the GIL
-        means = list(pool.map(lambda k: _mean(files[k], region, srgb), keys))
+        results = pool.map(lambda k: _mean(files[k], region, srgb), keys)
+        means = list(_with_progress(results, len(keys), f"reading {folder.name}"))
     channels = {m.shape[0] for m in means}
     if len(channels) != 1:
         counts = [m.shape[0] for m in means]

@@ -93,7 +93,7 @@ def interpolate_scattered(m: Measurement, *, reciprocal: bool = True) -> Measure
     )
 
 
-def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, **options) -> Measurement:
+def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, progress: bool = False, **options) -> Measurement:
     """A UBO-81 Measurement from a Measurement or a path (see the module docstring)."""
     from . import detect_format, load
 
@@ -101,7 +101,7 @@ def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, **options)
         raise UsageError(f"unknown grid {grid!r}; supported: 'ubo81'")
     if isinstance(source, str | os.PathLike):
         fmt = detect_format(source)
-        m = load(source, **options)  # evaluable sources come back on the UBO-81 grid
+        m = load(source, progress=progress, **options)  # evaluable sources come back on the UBO-81 grid
         if fmt in EVALUABLE and m.grid == "ubo81":
             return m
     elif isinstance(source, Measurement):
