@@ -25,12 +25,6 @@ def query_directions(wi=None, wo=None) -> tuple[np.ndarray, np.ndarray, str | No
     return wi, wo, None
 
 
-def file_size(path) -> int:
-    import os
-
-    return os.path.getsize(path)
-
-
 # -- metadata as JSON (EXR header, NPZ member) ------------------------------------------------------
 def _jsonable(v):
     if isinstance(v, tuple | list):
