@@ -80,3 +80,18 @@ def test_rgl_truncated_is_input_error(tmp_path):
         with pytest.raises(InputError, match="truncated") as e:
             brdffit.load(p)
         assert str(p) in str(e.value)
+
+
+@pytest.mark.skipif(not RGL_FILES, reason="real measurements not found")
+def test_rgl_inconsistent_shapes_rejected_before_mitsuba(tmp_path):
+    import struct
+
+    data = bytearray(RGL_FILES[0].read_bytes())
+    at = data.index(b"\x07\x00theta_i") + 2 + 7  # after the name: ndim u16, dtype u8, offset u64, shape
+    ndim = struct.unpack_from("<H", data, at)[0]
+    assert ndim == 1
+    struct.pack_into("<Q", data, at + 2 + 1 + 8, 7)  # 8 -> 7 elevations: disagrees with 'rgb'
+    p = tmp_path / "shapes.bsdf"
+    p.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="'theta_i' has shape"):
+        brdffit.load(p)

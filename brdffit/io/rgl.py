@@ -74,8 +74,23 @@ def check_tensor_file(path: Path) -> dict[str, tuple[int, tuple[int, ...]]]:
     missing = [f for f in REQUIRED if f not in fields]
     if missing:
         raise InputError(path, f"tensor_file lacks the field(s) {', '.join(missing)} of an RGL RGB material")
-    if len(fields["rgb"][1]) != 5 or fields["rgb"][1][-3] != 3:
-        raise InputError(path, f"field 'rgb' has shape {fields['rgb'][1]}, expected (phi_i, theta_i, 3, n, n)")
+    rgb = fields["rgb"][1]
+    if len(rgb) != 5 or rgb[2] != 3:
+        raise InputError(path, f"field 'rgb' has shape {rgb}, expected (phi_i, theta_i, 3, n, n)")
+    # shapes the plugin indexes with one another: a mismatch would read out of bounds in C++
+    n_phi, n_theta = rgb[0], rgb[1]
+    expected = {
+        "phi_i": (n_phi,),
+        "theta_i": (n_theta,),
+        "luminance": (n_phi, n_theta, rgb[3], rgb[4]),
+    }
+    for field, shape in expected.items():
+        if fields[field][1] != shape:
+            raise InputError(path, f"field {field!r} has shape {fields[field][1]}, expected {shape} to match 'rgb' {rgb}")
+    if fields["vndf"][1][:2] != (n_phi, n_theta) or len(fields["vndf"][1]) != 4:
+        raise InputError(path, f"field 'vndf' has shape {fields['vndf'][1]}, expected ({n_phi}, {n_theta}, n, n)")
+    if int(np.prod(fields["valid"][1])) != rgb[3] * rgb[4]:
+        raise InputError(path, f"field 'valid' has shape {fields['valid'][1]}, expected {rgb[3] * rgb[4]} entries")
     return fields
 
 
