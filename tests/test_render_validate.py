@@ -126,3 +126,25 @@ def test_invalid_table_entries_are_left_out(tmp_path):
     assert v.metrics["table"]["valid_pairs"] == 6561 - 81
     assert v.metrics["table"]["rmse"] < 1e-9
     assert np.all(np.isnan(v.table_reference[0])) and np.all(np.isfinite(v.table_reference[1:]))
+
+
+def test_failure_leaves_nothing_behind(tmp_path, monkeypatch):
+    import brdffit.render.panels as panels
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(panels, "table_panel", broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        validate(ggx_measurement(), ("ggx", GGX), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_identical_images_give_strict_json(tmp_path):
+    m = ggx_measurement()
+    # a Lambertian table is reproduced exactly by the interpolator: identical images, PSNR = inf
+    flat = m.replace(values=np.full((6561, 3), 0.2))
+    v = validate(flat, ("lambert", {"kd": 0.2 * np.pi}), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
+    assert v.metrics["overall"]["psnr"] == float("inf")
+    text = (tmp_path / "v" / "metrics.json").read_text()
+    assert json.loads(text)["overall"]["psnr"] is None and "Infinity" not in text

@@ -73,6 +73,15 @@ def _light_to_world(mi, d: np.ndarray):
     return _look_at(mi, (0.0, 0.0, 0.0), -d, up)
 
 
+def _sampler(spp: int) -> dict:
+    """Stratified (jittered) samples over the pixel footprint when spp is a square (1, 4, 16, ...),
+    which Mitsuba's stratified sampler needs, else independent ones."""
+    root = int(round(spp**0.5))
+    if root * root == spp:
+        return {"type": "stratified", "sample_count": spp, "jitter": True}
+    return {"type": "independent", "sample_count": spp}
+
+
 def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) -> dict:
     """The Mitsuba scene description (see the module docstring)."""
     mi = mitsuba()
@@ -90,7 +99,7 @@ def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) 
                 "pixel_format": "rgb",
                 "rfilter": {"type": "box"},
             },
-            "sampler": {"type": "stratified", "sample_count": spp, "jitter": True},
+            "sampler": _sampler(spp),
         },
         "sphere": {
             "type": "sphere",
@@ -120,7 +129,8 @@ def render_sphere(
     ``source``: a FitResult, a ``(model_name, params)`` pair, a UBO-81 Measurement, or a path to an
     RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the
     lights (L, 3), or (theta, phi) pairs in radians (L, 2). ``irradiance``: on a surface facing the
-    light. ``spp``: stratified samples per pixel. ``progress(k, L)`` is called after each image.
+    light. ``spp``: samples per pixel (stratified when a square). ``progress(k, L)`` is called
+    after each image.
 
     An isotropic BRDF renders f_r(l, v) (n.l) irradiance with n = (x, y, sqrt(1 - x^2 - y^2)),
     v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,

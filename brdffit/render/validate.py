@@ -92,6 +92,18 @@ def _tag(d: np.ndarray) -> str:
     return f"t{theta:02d}_p{phi:03d}"
 
 
+def _finite_or_null(x):
+    """Metrics as strict JSON: inf (identical images' PSNR) and NaN (an all-black reference's
+    relative RMSE) become null."""
+    if isinstance(x, dict):
+        return {k: _finite_or_null(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite_or_null(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
+
+
 def _write_exr(path: Path, img: np.ndarray) -> None:
     import OpenEXR
 
@@ -216,7 +228,7 @@ def validate(
             tell("panels", len(dirs) + 1, len(dirs) + 1)
             lap("metrics and panels")
             metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
-            (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True) + "\n")
+            (tmp / "metrics.json").write_text(json.dumps(_finite_or_null(metrics), indent=2) + "\n")
             files.append(Path(out) / "metrics.json")
     lap("metrics and panels" if out is not None else "metrics")
     metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
