@@ -153,3 +153,22 @@ def test_bad_lights_and_sources():
         render_sphere("/nonexistent/x.bsdf", [0, 0, 1], size=8)
     with pytest.raises(TypeError):
         render_sphere(42, [0, 0, 1], size=8)
+
+
+def test_table_source_matches_closed_form():
+    """A UBO-81 Measurement renders as the closed form of its interpolated table."""
+    from brdffit import Measurement
+    from brdffit.grid import ubo_pairs
+
+    wi, wo = ubo_pairs()
+    values = np.random.default_rng(3).uniform(0.05, 0.5, (6561, 3))
+    m = Measurement(wi, wo, values, name="random_table", grid="ubo81")
+    size = 32
+    img = render_sphere(m, LIGHTS, size=size, spp=64)
+    ref = closed_form(as_source(m).brdf, LIGHTS, size)
+    assert mean_relative_difference(img, ref, interior(size)) < 0.01
+
+
+def test_top_level_exports():
+    assert brdffit.render_sphere is render_sphere
+    assert brdffit.validate is brdffit.render.validate and brdffit.Validation is brdffit.render.Validation

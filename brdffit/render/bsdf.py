@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -44,6 +45,8 @@ BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 #: most SMALL directions (the scalar variant: one per call) use a second, small shape.
 CHUNK = 1 << 16
 SMALL = 16
+#: Seconds each model compilation took (in the background), for the time report of a validation.
+COMPILE_SECONDS: list[float] = []
 
 
 def model_brdf(model, params) -> BrdfFn:
@@ -64,7 +67,13 @@ def model_brdf(model, params) -> BrdfFn:
     # Compile for the CHUNK shape in a background thread now: XLA compiles without the GIL, so this
     # overlaps with whatever comes next (in a validation: rendering the reference).
     pole = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
-    warm = threading.Thread(target=lambda: f(pole, pole).block_until_ready(), name="brdffit-jit", daemon=True)
+
+    def compile_now():
+        t = time.perf_counter()
+        f(pole, pole).block_until_ready()
+        COMPILE_SECONDS.append(time.perf_counter() - t)
+
+    warm = threading.Thread(target=compile_now, name="brdffit-jit", daemon=True)
     warm.start()
 
     def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
