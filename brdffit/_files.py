@@ -12,6 +12,13 @@ from pathlib import Path
 from .errors import UsageError
 
 
+def _usual_mode(path: Path, folder: bool) -> None:
+    """mkstemp/mkdtemp create 0600/0700 entries; a result gets the usual permissions (umask)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, (0o777 if folder else 0o666) & ~umask)
+
+
 def check_target(path: str | os.PathLike, force: bool) -> Path:
     path = Path(path)
     if path.exists() and not force:
@@ -26,6 +33,7 @@ def atomic_file(path: str | os.PathLike, force: bool = False, suffix: str | None
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
     os.close(fd)
+    _usual_mode(Path(tmp), folder=False)
     try:
         yield Path(tmp)
         os.replace(tmp, path)
@@ -40,6 +48,7 @@ def atomic_dir(path: str | os.PathLike, force: bool = False):
     path = check_target(path, force)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    _usual_mode(tmp, folder=True)
     try:
         yield tmp
         if path.exists():

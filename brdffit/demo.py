@@ -72,14 +72,12 @@ def run_demo(out: str | Path, force: bool = False, console=None) -> dict[str, Pa
     from ._files import atomic_dir
     from .cli.info import print_info
     from .io import save
-    from .io._common import readable_mode
 
     console = console or Console()
     out = Path(out)
     m, origin = sample_measurement()
     written: dict[str, Path] = {}
     with atomic_dir(out, force=force) as tmp:
-        readable_mode(tmp, folder=True)
         console.rule("[bold]1. load + info")
         print_info(m, "exr" if origin.endswith(".exr") else "sample", origin, console=console)
         console.rule("[bold]2. convert")

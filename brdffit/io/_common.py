@@ -67,12 +67,3 @@ def meta_from_json(text: str) -> dict:
     out = {k: doc[k] for k in META_FIELDS if k in doc}
     out["extra"] = {str(k): _from_jsonable(v) for k, v in doc.get("extra", [])}
     return out
-
-
-def readable_mode(path, folder: bool = False) -> None:
-    """Give a fresh temporary file or folder the usual permissions (mkstemp/mkdtemp make them 0600/0700)."""
-    import os
-
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, (0o777 if folder else 0o666) & ~umask)

@@ -29,7 +29,7 @@ from .._files import atomic_file
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..measurement import Measurement
-from ._common import meta_from_json, meta_to_json, readable_mode
+from ._common import meta_from_json, meta_to_json
 from .npz import check_usable
 
 FORMAT_TAG = "ubo81-table/1"
@@ -85,7 +85,6 @@ def write(m: Measurement, path, *, force: bool = False) -> None:
     }
     with atomic_file(path, force=force) as tmp:
         OpenEXR.File(header, channels).write(str(tmp))
-        readable_mode(tmp)
 
 
 def read(path, *, name: str | None = None) -> Measurement:

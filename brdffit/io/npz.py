@@ -13,7 +13,7 @@ import numpy as np
 from .._files import atomic_file
 from ..errors import InputError
 from ..measurement import Measurement
-from ._common import meta_from_json, meta_to_json, readable_mode
+from ._common import meta_from_json, meta_to_json
 
 REQUIRED = ("wi", "wo", "values")
 
@@ -29,7 +29,6 @@ def write(m: Measurement, path, *, force: bool = False) -> None:
                 weights=np.asarray(m.weights, dtype=np.float64),
                 metadata=np.array(meta_to_json(m)),
             )
-        readable_mode(tmp)
 
 
 def read(path, *, name: str | None = None) -> Measurement:
