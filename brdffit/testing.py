@@ -1,0 +1,132 @@
+"""Assertions for users' own pytest suites (and brdffit's).
+
+    from brdffit.testing import assert_model_well_behaved, assert_fit_quality, assert_reciprocal
+
+    def test_my_model():                      # a model of your own, or a composite
+        assert_model_well_behaved("lambert+ggx+ggx", dtype="float32")
+
+    def test_material_fit(my_measurement):
+        result = brdffit.fit(my_measurement, "ggx")
+        assert_fit_quality(result, max_log_rmse=0.05)
+
+Fixtures for real data and the UBO grid: add ``pytest_plugins = ["brdffit.pytest_plugin"]`` to your
+``conftest.py``. Each assertion raises ``AssertionError`` with a message that says where it failed.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .grid import spherical_to_cartesian
+from .models import Model, get
+
+#: Polar angles that stress a formula: normal incidence, near-normal, the UBO rings, grazing, the horizon.
+EXTREME_THETAS_DEG = (0.0, 1e-3, 15.0, 45.0, 75.0, 89.0, 89.9, 90.0)
+EXTREME_PHIS_DEG = (0.0, 37.0, 90.0, 180.0, 271.0)
+
+
+def extreme_pairs() -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) pairs over the closed upper hemisphere that break naive formulas: every pair of
+    the extreme directions (so wi == wo too), mirror pairs, and opposite grazing pairs whose half
+    vector is undefined."""
+    th, ph = np.meshgrid(np.deg2rad(EXTREME_THETAS_DEG), np.deg2rad(EXTREME_PHIS_DEG), indexing="ij")
+    d = spherical_to_cartesian(th.ravel(), ph.ravel())
+    d[np.abs(d) < 1e-15] = 0.0  # exact zeros: the horizon is z == 0, the pole x == y == 0
+    n = len(d)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    mirror = d * np.array([-1.0, -1.0, 1.0])
+    opposite = (np.array([[1.0, 0, 0], [0, 1.0, 0]]), np.array([[-1.0, 0, 0], [0, -1.0, 0]]))
+    wi = np.concatenate([d[i.ravel()], d, opposite[0]])
+    wo = np.concatenate([d[j.ravel()], mirror, opposite[1]])
+    return wi, wo
+
+
+def stress_parameter_sets(model: Model) -> list[dict[str, float]]:
+    """Defaults, all-lower, all-upper, and each parameter alone at its lower and upper bound."""
+    base = {p.name: p.default for p in model.params}
+    sets = [dict(base), {p.name: p.lower for p in model.params}, {p.name: p.upper for p in model.params}]
+    for p in model.params:
+        sets += [dict(base, **{p.name: p.lower}), dict(base, **{p.name: p.upper})]
+    return sets
+
+
+def model_problems(model: str | Model, dtype="float64", param_sets=None, pairs=None) -> list[str]:
+    """Everything wrong with a model's values and gradients at stress parameters and directions.
+
+    Checks, per parameter set: values finite and >= 0, in ``dtype`` (no promotion of float32);
+    the Jacobian with respect to the parameters and the gradients with respect to wi and wo
+    finite. One jit compilation: the parameter sets are vmapped. Returns [] when all is well.
+    """
+    model = get(model) if isinstance(model, str) else model
+    dtype = jnp.dtype(dtype)
+    wi_np, wo_np = pairs if pairs is not None else extreme_pairs()
+    wi, wo = jnp.asarray(wi_np, dtype), jnp.asarray(wo_np, dtype)
+    sets = param_sets if param_sets is not None else stress_parameter_sets(model)
+    flat = jnp.asarray(np.stack([np.asarray(model.flatten(s)) for s in sets]), dtype)
+
+    def f(x, a, b):
+        return model.eval(model.unflatten(x), a, b)
+
+    def checks(x):
+        val = f(x, wi, wo)
+        jac = jax.jacfwd(f)(x, wi, wo)  # (N, C, P): per sample, per parameter
+        gi, go = jax.grad(lambda a, b: jnp.sum(f(x, a, b)), argnums=(0, 1))(wi, wo)
+        return val, jac, gi, go
+
+    val, jac, gi, go = jax.jit(jax.vmap(checks))(flat)
+    problems = []
+    if val.dtype != dtype or jac.dtype != dtype:
+        problems.append(f"{model.name}: evaluated in {val.dtype}, not {dtype} (the formula promotes)")
+    for k, s in enumerate(sets):
+        label = " ".join(f"{name}={value:g}" for name, value in s.items())
+        v = np.asarray(val[k])
+        bad = (~np.isfinite(v) | (v < 0)).any(axis=1)
+        if bad.any():
+            problems.append(f"{model.name} [{label}]: non-finite or negative value at wi={wi_np[bad][0]}, wo={wo_np[bad][0]}")
+        for what, g in (("d/dparams", jac[k]), ("d/dwi", gi[k]), ("d/dwo", go[k])):
+            badg = ~np.isfinite(np.asarray(g).reshape(len(wi_np), -1)).all(axis=1)
+            if badg.any():
+                problems.append(f"{model.name} [{label}] {what} not finite at wi={wi_np[badg][0]}, wo={wo_np[badg][0]}")
+    return problems
+
+
+def assert_model_well_behaved(model: str | Model, dtype="float64", **options) -> None:
+    """Assert :func:`model_problems` finds nothing (at most 5 problems are listed)."""
+    problems = model_problems(model, dtype, **options)
+    if problems:
+        more = f"\n... and {len(problems) - 5} more" if len(problems) > 5 else ""
+        raise AssertionError("\n".join(problems[:5]) + more)
+
+
+def assert_reciprocal(model: str | Model, params=None, rtol: float = 1e-9, pairs=None) -> None:
+    """Assert f_r(wi, wo) == f_r(wo, wi) (Helmholtz reciprocity) on the given or extreme pairs."""
+    model = get(model) if isinstance(model, str) else model
+    params = model.defaults() if params is None else model.check_params(params)
+    wi, wo = pairs if pairs is not None else extreme_pairs()
+    a = np.asarray(model.eval(params, wi, wo))
+    b = np.asarray(model.eval(params, wo, wi))
+    err = np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)
+    k = int(np.argmax(err.max(axis=1)))
+    if err[k].max() > rtol:
+        raise AssertionError(f"{model.name}: not reciprocal at wi={wi[k]}, wo={wo[k]}: {a[k]} vs {b[k]} (rel. {err[k].max():.3g})")
+
+
+def assert_fit_quality(result, *, max_log_rmse: float | None = None, max_rmse: float | None = None,
+                       max_relative: float | None = None, require_converged: bool = True) -> None:
+    """Assert a FitResult converged (unless told otherwise) and its metrics are within the limits."""
+    failures = []
+    if require_converged and not result.converged:
+        failures.append(f"did not converge: {result.status}")
+    metrics = result.metrics
+    for key, limit in (("log_rmse", max_log_rmse), ("rmse", max_rmse), ("relative", max_relative)):
+        if limit is None:
+            continue
+        value = metrics.get(key, metrics.get(f"{key}_rmse")) if key == "relative" else metrics.get(key)
+        if value is None:
+            failures.append(f"metric {key!r} missing (have {sorted(metrics)})")
+        elif not value <= limit:
+            failures.append(f"{key} {value:.4g} > {limit:.4g}")
+    if failures:
+        raise AssertionError(f"fit of {result.model_name} to {result.data_name}: " + "; ".join(failures))

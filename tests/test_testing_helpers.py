@@ -1,0 +1,48 @@
+"""brdffit.testing and the opt-in pytest plugin, as a user's suite would use them."""
+
+import subprocess
+import sys
+import textwrap
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from brdffit.testing import assert_fit_quality, assert_reciprocal
+
+
+def test_assert_reciprocal_passes_for_ggx_and_fails_for_phong_classic():
+    assert_reciprocal("ggx")
+    with pytest.raises(AssertionError, match="phong_classic: not reciprocal"):
+        assert_reciprocal("phong_classic")
+
+
+def test_assert_fit_quality_reports_each_failure():
+    good = SimpleNamespace(converged=True, status="converged", metrics={"rmse": 0.01, "log_rmse": 0.02},
+                           model_name="ggx", data_name="paper")
+    assert_fit_quality(good, max_log_rmse=0.05, max_rmse=0.1)
+    bad = SimpleNamespace(converged=False, status="max steps reached", metrics={"rmse": 0.5, "log_rmse": np.nan},
+                          model_name="ggx", data_name="paper")
+    with pytest.raises(AssertionError) as info:
+        assert_fit_quality(bad, max_log_rmse=0.05, max_rmse=0.1)
+    message = str(info.value)
+    assert "did not converge: max steps reached" in message
+    assert "rmse 0.5 > 0.1" in message and "log_rmse nan > 0.05" in message
+
+
+def test_pytest_plugin_fixtures_in_a_users_suite(tmp_path):
+    (tmp_path / "test_user.py").write_text(textwrap.dedent(
+        """
+        def test_pairs(ubo_pairs):
+            wi, wo = ubo_pairs
+            assert wi.shape == (6561, 3) and (wi[81] == wi[81 + 80]).all()
+
+        def test_data(brdffit_data):
+            assert (brdffit_data / "measured").is_dir()
+        """
+    ))
+    env_missing = {"BRDFFIT_DATA": str(tmp_path / "nowhere"), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-p", "brdffit.pytest_plugin", "-q", "-rs", str(tmp_path)],
+                          capture_output=True, text=True, env=env_missing, cwd=tmp_path, timeout=300)
+    assert "1 passed, 1 skipped" in proc.stdout, proc.stdout[-2000:]
+    assert "no real measurements" in proc.stdout
