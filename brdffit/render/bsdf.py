@@ -49,6 +49,20 @@ SMALL = 16
 COMPILE_SECONDS: list[float] = []
 
 
+@functools.cache
+def import_native() -> None:
+    """Import the native extensions rendering and validation use (Mitsuba / Dr.Jit, FLIP, OpenEXR)
+    in the calling thread, before this package starts any background thread.
+
+    A first import of a nanobind extension while another thread runs nanobind code (JAX compiling
+    in the background) once failed with "SystemError: <built-in function __import__> returned a
+    result with an exception set"; importing them up front removes the race.
+    """
+    mitsuba()
+    import flip_evaluator  # noqa: F401
+    import OpenEXR  # noqa: F401
+
+
 def model_brdf(model, params) -> BrdfFn:
     """NumPy f_r of an analytic model: the JAX ``model.eval`` (jitted), channels broadcast to 3.
 
@@ -59,6 +73,7 @@ def model_brdf(model, params) -> BrdfFn:
     import jax.numpy as jnp
 
     params = model.check_params(params)
+    import_native()  # before the compile thread below starts
 
     @jax.jit
     def f(wi, wo):

@@ -16,14 +16,16 @@ from .metrics import luminance, tonemap
 
 
 def preload() -> None:
-    """Import matplotlib (and FLIP) in a background thread while Mitsuba renders: the import costs
-    about half a second that would otherwise be spent after the renders."""
+    """Import matplotlib in a background thread while Mitsuba renders: the import costs about half a
+    second that would otherwise be spent after the renders.
+
+    Only matplotlib: the native extensions are imported up front by ``bsdf.import_native``.
+    """
     import threading
 
     def work():
         try:
             _plt()
-            import flip_evaluator  # noqa: F401
         except Exception:  # noqa: BLE001 - the real import reports any problem later
             pass
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from .._files import atomic_dir
 from ..grid import ubo_pairs
-from .bsdf import Source, as_source
+from .bsdf import Source, as_source, import_native
 from .scene import DEFAULT_SPP, disc_mask, light_directions, render_sphere
 
 #: Default light sweep: (theta, phi) in degrees, from the camera direction to grazing.
@@ -150,6 +150,9 @@ def validate(
         from .._files import check_target
 
         check_target(out, force)  # fail before the work, not after it
+    import_native()  # in this thread, before any background thread exists
+
+    if out is not None:
         from .panels import preload
 
         preload()
