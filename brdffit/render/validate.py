@@ -151,17 +151,16 @@ def validate(
 
         check_target(out, force)  # fail before the work, not after it
     import_native()  # in this thread, before any background thread exists
-
-    if out is not None:
-        from .panels import preload
-
-        preload()
     from .bsdf import COMPILE_SECONDS
 
     n_compiled = len(COMPILE_SECONDS)
     ref_src = as_source(source)
     fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
+    if out is not None:
+        from .panels import preload
+
+        preload()  # matplotlib, while the spheres render
     lap("load")
 
     ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
