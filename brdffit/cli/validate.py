@@ -78,7 +78,7 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
     total = _since_process_start()
     startup = None if total is None else max(0.0, total - (time.perf_counter() - t0))
     # startup: Python and `import brdffit` (JAX) before this command ran
-    times = {"startup": startup, "import": t_import, **v.seconds}
+    times = {"startup": startup, "import + read inputs": t_import, **v.seconds}
     times = {k: s for k, s in times.items() if s is not None}
     console.print("time: " + ", ".join(f"{k} {s:.2f} s" for k, s in times.items())
                   + (f"; total since the process started {total:.2f} s" if total is not None else ""), style="dim")

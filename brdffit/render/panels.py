@@ -15,23 +15,6 @@ from ..grid import UBO_THETA_DEG, ubo_angles_deg
 from .metrics import luminance, tonemap
 
 
-def preload() -> None:
-    """Import matplotlib in a background thread while Mitsuba renders: the import costs about half a
-    second that would otherwise be spent after the renders.
-
-    Only matplotlib: the native extensions are imported up front by ``bsdf.import_native``.
-    """
-    import threading
-
-    def work():
-        try:
-            _plt()
-        except Exception:  # noqa: BLE001 - the real import reports any problem later
-            pass
-
-    threading.Thread(target=work, name="brdffit-preload", daemon=True).start()
-
-
 def _plt():
     import matplotlib
 

@@ -157,10 +157,6 @@ def validate(
     ref_src = as_source(source)
     fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
-    if out is not None:
-        from .panels import preload
-
-        preload()  # matplotlib, while the spheres render
     lap("load")
 
     ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
