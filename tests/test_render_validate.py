@@ -148,3 +148,16 @@ def test_identical_images_give_strict_json(tmp_path):
     assert v.metrics["overall"]["psnr"] == float("inf")
     text = (tmp_path / "v" / "metrics.json").read_text()
     assert json.loads(text)["overall"]["psnr"] is None and "Infinity" not in text
+
+
+def test_unconverged_fit_is_labelled():
+    from brdffit.render import as_source
+
+    class Fit:
+        model = models.get("ggx")
+        params = GGX
+        converged = False
+
+    assert as_source(Fit()).label == "ggx (fit not converged)"
+    Fit.converged = True
+    assert as_source(Fit()).label == "ggx"

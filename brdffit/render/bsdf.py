@@ -304,7 +304,7 @@ def as_source(obj) -> Source:
         return obj
     if hasattr(obj, "model") and hasattr(obj, "params"):  # a FitResult (duck-typed)
         model = models.get(obj.model)
-        label = model.name
+        label = model.name if getattr(obj, "converged", True) is not False else f"{model.name} (fit not converged)"
         return Source("model", label, model_brdf(model, obj.params))
     if isinstance(obj, tuple) and len(obj) == 2:
         model = models.get(obj[0])
