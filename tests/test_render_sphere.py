@@ -172,3 +172,16 @@ def test_table_source_matches_closed_form():
 def test_top_level_exports():
     assert brdffit.render_sphere is render_sphere
     assert brdffit.validate is brdffit.render.validate and brdffit.Validation is brdffit.render.Validation
+
+
+def test_non_finite_brdf_values_are_not_hidden():
+    """The callback passes what the BRDF returns: a NaN shows up in the image (no silent clean-up)."""
+    from brdffit.render.bsdf import Source
+
+    def brdf(wi, wo):
+        out = np.full((wi.shape[0], 3), 0.1)
+        out[wi[:, 0] > 0.5] = np.nan
+        return out
+
+    img = render_sphere(Source("model", "nan test", brdf), [0, 0, 1], size=16, spp=1)
+    assert np.isnan(img).any() and np.isfinite(img[0, 8, 8]).all()

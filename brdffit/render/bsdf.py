@@ -148,8 +148,9 @@ def _callback_class():
             value = np.zeros((light.shape[0], 3))
             if up.any():
                 f = np.asarray(self.brdf(light[up], view[up]), np.float64)
+                # No clean-up of NaN or negative values: the image shows the BRDF as it is (and the
+                # tests that every model renders finite, non-negative images mean something).
                 value[up] = f * light[up, 2:3]
-            value = np.where(np.isfinite(value), value, 0.0)
             if scalar:
                 return mi.Color3f(*map(float, value[0])) if active else mi.Color3f(0.0)
             v32 = value.astype(np.float32)
