@@ -26,6 +26,9 @@ from .solve import (
     solve_scipy,
 )
 
+#: Further grid starts tried by default when the first solve does not converge.
+AUTO_RETRIES = 2
+
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
 
@@ -39,8 +42,10 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
 
     None for a parameter at one of its bounds (the active constraint makes the Gaussian
-    approximation meaningless there) and for all when J'J is singular or ill conditioned
-    (non-identifiable parameter combinations, e.g. ks and f0 of a microfacet lobe with f0 ~ 1).
+    approximation meaningless there), and for a parameter with a share in a (near) null direction
+    of the column-scaled J'J (condition > STDERR_MAX_COND): a combination the data do not
+    determine, e.g. ks and alpha of a lobe narrower than the sample spacing (only ks/alpha^2 is
+    seen), or Lafortune's rho and |C| (only rho |C|^n is seen).
     """
     v = np.asarray(model.flatten(params))
     J = np.asarray(_jacobian_fn(model, loss)(jnp.asarray(v), data))
@@ -52,16 +57,23 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     if not free.any() or not np.all(np.isfinite(J)):
         return out
     Jf = J[:, free]
-    jtj = Jf.T @ Jf
-    eig = np.linalg.eigvalsh(jtj)
-    if eig[0] <= 0 or eig[-1] / eig[0] > STDERR_MAX_COND:
-        return out
+    # Column scaling, so that the conditioning test does not depend on parameter units.
+    scale = np.linalg.norm(Jf, axis=0)
+    if np.any(scale == 0):
+        scale = np.where(scale == 0, 1.0, scale)
+    jtj = (Jf / scale).T @ (Jf / scale)
+    w, V = np.linalg.eigh(jtj)
+    small = w <= w[-1] / STDERR_MAX_COND
     dof = max(n_residuals - int(free.sum()), 1)
     # Residuals are normalised by 1/sqrt(n): sigma^2 (J'J)^-1 of the unnormalised problem equals
-    # (sum r^2 / dof) (J'J)^-1 in these units.
-    cov = np.linalg.inv(jtj) * (loss_value / dof)
+    # (sum r^2 / dof) (J'J)^-1 in these units. A parameter with a share in a (near) null
+    # direction of J'J is not identifiable from these data: no standard error for it.
+    s2 = loss_value / dof
+    in_null = (V[:, small] ** 2).sum(axis=1) > 1e-6
+    var = (V[:, ~small] ** 2 / w[~small]).sum(axis=1) * s2 / scale**2
+    se_free = np.where(in_null, np.nan, np.sqrt(np.maximum(var, 0.0)))
     se = np.full(v.shape, np.nan)
-    se[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    se[free] = se_free
     i = 0
     for p in model.params:
         n = model.size(p)
@@ -123,7 +135,12 @@ def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol,
         out_lo = (d_lo <= NEAR_BOUND) & (g > 0)
         out_hi = (d_hi <= NEAR_BOUND) & (g < 0)
         new_held = out_lo | out_hi
-        if value is not None and code == 0 and np.array_equal(new_held, held):
+        if value is None:
+            # First round: everything free. (Holding parameters that the start puts on a bound
+            # can trap the solve in a corner that is a constrained local minimum only.)
+            new_held = np.zeros(v.shape, bool)
+            out_lo = out_hi = new_held
+        elif code == 0 and np.array_equal(new_held, held):
             break
         if total_steps >= max_steps:
             code = code if code != 0 else 1
@@ -167,7 +184,7 @@ def fit(
     loss: str = "log",
     solver: str = "lm",
     init=None,
-    multistart: int = 0,
+    multistart: int | None = None,
     max_steps: int = DEFAULT_MAX_STEPS,
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
@@ -180,7 +197,8 @@ def fit(
     loss: l2 | cosine_l2 | log | cbrt | relative. solver: lm | gauss_newton | dogleg | bfgs | scipy.
     init: None (variable-projection grid search, see ``brdffit.fitting.init``), "defaults", a
     params dict (missing parameters take their defaults) or a FitResult. multistart: polish this
-    many further grid starts and keep the best. Non-convergence is reported in ``.status``, never
+    many further grid starts and keep the best; None (default) polishes AUTO_RETRIES further
+    starts only when the first solve does not converge. Non-convergence is reported in ``.status``, never
     raised; parameters are never NaN.
     """
     loss = check_loss(loss)
@@ -192,8 +210,10 @@ def fit(
     data = prep.data
 
     compile_s = run_s = init_s = 0.0
+    auto = multistart is None
+    extra = AUTO_RETRIES if auto else max(0, int(multistart))
     if init is None:
-        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + max(0, int(multistart)), budget=grid_budget)
+        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + extra, budget=grid_budget)
         compile_s += c_s
         run_s += r_s
         init_s = c_s + r_s
@@ -212,8 +232,11 @@ def fit(
             )
         compile_s += c_s
         run_s += r_s
-        if best is None or value < best[1]:
+        # Prefer a converged solve; among equals, the lower loss.
+        if best is None or (code == 0, -value) > (best[2] == 0, -best[1]):
             best = (v, value, code, steps, v0)
+        if auto and code == 0:
+            break
     v, value, code, steps, v0 = best
 
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
@@ -239,6 +262,6 @@ def fit(
         excluded=prep.excluded,
         stderr=stderr,
         start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
-        options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "multistart": int(multistart),
+        options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "multistart": None if multistart is None else int(multistart),
                  "init": "grid" if init is None else "given"},
     )
