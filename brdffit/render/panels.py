@@ -15,13 +15,12 @@ from ..grid import UBO_THETA_DEG, ubo_angles_deg
 from .metrics import luminance, tonemap
 
 
-def _plt():
-    import matplotlib
+def _figure(figsize):
+    """A matplotlib Figure without pyplot: no global figure registry to clean up, and a lighter
+    import than ``matplotlib.pyplot``; ``savefig`` renders it with Agg."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    return Figure(figsize=figsize)
 
 
 def _limit(d: np.ndarray) -> float:
@@ -45,9 +44,7 @@ class SpherePanels:
     """
 
     def __init__(self, size: int, ref_label: str, fit_label: str, irradiance: float = 1.0):
-        plt = _plt()
-        self.plt = plt
-        fig = plt.figure(figsize=(11.0, 4.1))
+        fig = _figure((11.0, 4.1))
         # fixed layout (no tight_layout: it draws the figure once more)
         left, width, gap, top, height = 0.015, 0.27, 0.02, 0.83, 0.76
         axes = [fig.add_axes((left + k * (width + gap), top - height, width, height)) for k in range(3)]
@@ -96,7 +93,7 @@ class SpherePanels:
         self.fig.savefig(path, dpi=90, pil_kwargs={"compress_level": 1})
 
     def close(self):
-        self.plt.close(self.fig)
+        self.fig.clear()
 
 
 def _ring_ticks(ax) -> None:
@@ -117,7 +114,6 @@ def _ring_ticks(ax) -> None:
 def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: str, fit_label: str, metrics: dict) -> None:
     """The 81x81 tables (rows: light, columns: view, ordered by theta then phi) as the UTIA
     database shows them: f_r * cos(theta_light) tone-mapped | fitted | signed error."""
-    plt = _plt()
     from ..grid import ubo_directions
 
     cos_l = np.maximum(ubo_directions()[:, 2], 0.0)[:, None, None]
@@ -128,7 +124,8 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
     from .metrics import exposure
 
     scale = exposure(ref)
-    fig, axes = plt.subplots(1, 3, figsize=(12.0, 4.4), gridspec_kw={"width_ratios": [1, 1, 1.22]})
+    fig = _figure((12.0, 4.4))
+    axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1, 1.22]})
     for ax, img, title in ((axes[0], ref, f"measured\n{ref_label}"), (axes[1], fit, f"fitted\n{fit_label}")):
         ax.imshow(tonemap(img, scale), interpolation="nearest")
         ax.set_title(title, fontsize=10)
@@ -138,6 +135,7 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
     axes[2].set_title("error: fitted − measured\n(luminance of f_r cos θ_light)", fontsize=10)
     cb = fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04)
     cb.set_label("f_r cos θ_light difference (1/sr)", fontsize=8)
+    cb.ax.tick_params(labelsize=8)
     for ax in axes:
         _ring_ticks(ax)
         ax.set_xlabel("view θ ring (φ increasing within)", fontsize=8)
@@ -147,6 +145,5 @@ def table_panel(path: Path, reference: np.ndarray, fit: np.ndarray, ref_label: s
         f"rel. RMSE {metrics['relative_rmse']:.3g}   log-RMSE {metrics['log_rmse']:.3g}",
         fontsize=11,
     )
-    fig.subplots_adjust(left=0.05, right=0.94, bottom=0.12, top=0.8, wspace=0.25)
+    fig.subplots_adjust(left=0.05, right=0.92, bottom=0.12, top=0.8, wspace=0.25)
     fig.savefig(path, dpi=90, pil_kwargs={"compress_level": 1})
-    plt.close(fig)
