@@ -22,6 +22,7 @@ from .solve import (
     DEFAULT_RTOL,
     STATUS_TEXT,
     check_solver,
+    solve_lmb,
     solve_optx,
     solve_scipy,
 )
@@ -226,6 +227,8 @@ def fit(
             v, value, code, steps, c_s, r_s = solve_scipy(
                 m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps, jac=scipy_jac
             )
+        elif solver == "lmb":
+            v, value, code, steps, c_s, r_s = solve_lmb(m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps)
         else:
             v, value, code, steps, c_s, r_s = _active_set_solve(
                 m, loss, solver, v0, data, rtol=rtol, atol=atol, max_steps=max_steps

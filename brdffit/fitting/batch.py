@@ -92,8 +92,8 @@ def fit_batch(
     """Fit ``model`` to each measurement independently; see the module docstring."""
     loss = check_loss(loss)
     solver = check_solver(solver)
-    if solver == "scipy":
-        raise UsageError("fit_batch: solver 'scipy' is not batched; use fit() per measurement")
+    if solver in ("scipy", "lmb"):
+        raise UsageError(f"fit_batch: solver {solver!r} is not batched (yet); use an optimistix solver or fit()")
     measurements = list(measurements)
     if not measurements:
         return []
