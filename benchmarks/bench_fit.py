@@ -72,7 +72,11 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--model", default="ggx")
     ap.add_argument("--loss", default="log")
+    ap.add_argument("--batch", type=int, default=0, metavar="N",
+                    help="instead: fit_batch on N synthetic ggx texels (UBO-81), chunked/sorted vs not, vs a loop of fit()")
     args = ap.parse_args(argv)
+    if args.batch:
+        return bench_batch(args.batch, args.loss)
 
     rows = []
     for path in data_files():
@@ -121,6 +125,42 @@ def main(argv=None) -> int:
         slower_b += rbt >= sr
     print(f"\n{len(rows)} materials: loss higher than scipy's (by > 1e-6 relative): lm {worse}, lmb {worse_b}; "
           f"not faster (run): lm {slower}, lmb {slower_b}.")
+    print(f"devices: {jax.devices()}")
+    return 0
+
+
+def bench_batch(n: int, loss: str) -> int:
+    """fit_batch: one vmapped solve runs every lane until the slowest stops; chunking + sorting by
+    start loss limits that. Compares wall times (after a warm-up call of the same shapes)."""
+    from brdffit.grid import ubo_pairs
+
+    wi, wo = ubo_pairs()
+    model = brdffit.models.get("ggx")
+    rng = np.random.default_rng(0)
+    ms = []
+    for i in range(n):
+        p = {"kd": rng.uniform(0.05, 0.6, 3), "ks": rng.uniform(0.1, 0.9, 3),
+             "alpha": np.exp(rng.uniform(np.log(0.03), np.log(0.6), 1)), "f0": rng.uniform(0.02, 0.9, 1)}
+        f = np.asarray(model.eval(p, wi, wo))
+        ms.append(brdffit.Measurement(wi, wo, f * (1 + 0.01 * rng.standard_normal(f.shape)), grid="ubo81", name=f"t{i}"))
+    configs = [(f"{solver}, {label}", dict(solver=solver, **kw)) for solver in ("lmb", "lm") for label, kw in (
+        ("one chunk, unsorted", dict(chunk=n, sort=False)), ("chunks of 8, sorted", dict(chunk=8, sort=True)),
+        ("chunks of 8, unsorted", dict(chunk=8, sort=False)))]
+    for label, kw in configs:
+        brdffit.fit_batch(ms[: kw["chunk"]] if kw["chunk"] < n else ms, "ggx", loss=loss, **kw)  # warm-up (compile)
+        t0 = time.perf_counter()
+        rs = brdffit.fit_batch(ms, "ggx", loss=loss, **kw)
+        dt = time.perf_counter() - t0
+        steps = [r.steps for r in rs]
+        print(f"fit_batch {label:29s}: {dt:.2f}s for {n} fits ({dt / n * 1000:.0f} ms/fit), steps max {max(steps)} "
+              f"median {int(np.median(steps))}, converged {sum(r.converged for r in rs)}/{n}", flush=True)
+    for solver in ("lm", "lmb"):
+        brdffit.fit(ms[0], "ggx", loss=loss, solver=solver)
+        t0 = time.perf_counter()
+        rs = [brdffit.fit(m, "ggx", loss=loss, solver=solver) for m in ms]
+        dt = time.perf_counter() - t0
+        print(f"loop of fit(solver={solver!r}){'':9s}: {dt:.2f}s for {n} fits ({dt / n * 1000:.0f} ms/fit), "
+              f"converged {sum(r.converged for r in rs)}/{n}", flush=True)
     print(f"devices: {jax.devices()}")
     return 0
 

@@ -18,10 +18,24 @@ def _split(values: tuple[str, ...]) -> list[str]:
     return out
 
 
+def print_report(report, loss: str, console) -> None:
+    """The report as a table sorted by the ``loss`` it was ranked with."""
+    from rich.table import Table
+
+    table = Table(title=f"{report.data_name}: error against run time")
+    for col in ("model", "solver", "loss", "params", f"{loss} loss", "run s", "compile s", "steps", "status"):
+        table.add_column(col)
+    for r in sorted(report.rows, key=lambda r: r[f"loss_{loss}"]):
+        table.add_row(r["model"], r["solver"], r["loss"], str(r["n_params"]), f"{r[f'loss_{loss}']:.4g}",
+                      f"{r['run_s']:.3f}", f"{r['compile_s']:.2f}", str(r["steps"]),
+                      "ok" if r["converged"] else f"[red]{r['status']}[/]")
+    console.print(table)
+
+
 @cli.command("compare")
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--models", multiple=True, help="Models (repeat or comma-separate) [all base models].")
-@click.option("--solvers", multiple=True, help="Solvers [lm, dogleg, bfgs, scipy].")
+@click.option("--solvers", multiple=True, help="Solvers [lm, lmb, dogleg, bfgs, scipy].")
 @click.option("--losses", multiple=True, help="Losses [log].")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [compare-<name>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
@@ -29,8 +43,6 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
     """Fit every model x solver x loss; table of errors and times, and a Pareto plot."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-    from rich.table import Table
-
     from .. import load
     from .. import models as _models
     from .._files import atomic_dir, check_target
@@ -40,7 +52,7 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
     from ..fitting.solve import check_solver
 
     models = _split(models) or _models.names()
-    solvers = [check_solver(s) for s in (_split(solvers) or ["lm", "dogleg", "bfgs", "scipy"])]
+    solvers = [check_solver(s) for s in (_split(solvers) or ["lm", "lmb", "dogleg", "bfgs", "scipy"])]
     losses = [check_loss(x) for x in (_split(losses) or ["log"])]
     for name in models:
         resolve_model(name, 3)
@@ -67,13 +79,6 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
         report.to_csv(tmp / "report.csv")
         report.to_json(tmp / "report.json")
         report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
-    table = Table(title=f"{m.name}: error against run time")
-    for col in ("model", "solver", "loss", "params", f"{losses[0]} loss", "run s", "compile s", "steps", "status"):
-        table.add_column(col)
-    for r in sorted(report.rows, key=lambda r: r[f"loss_{losses[0]}"]):
-        table.add_row(r["model"], r["solver"], r["loss"], str(r["n_params"]), f"{r[f'loss_{losses[0]}']:.4g}",
-                      f"{r['run_s']:.3f}", f"{r['compile_s']:.2f}", str(r["steps"]),
-                      "ok" if r["converged"] else f"[red]{r['status']}[/]")
-    Console().print(table)
+    print_report(report, losses[0], Console())
     console.print(f"wrote {out}/report.csv, {out}/report.json, {out}/pareto.png")
     return EXIT_OK if all(r["converged"] for r in report.rows) else EXIT_NOT_CONVERGED

@@ -70,7 +70,7 @@ def plot_fit(measurement, result, path: Path) -> None:
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx+ggx.")
 @click.option("--loss", default="log", show_default=True, help="l2 | cosine_l2 | log | cbrt | relative")
-@click.option("--solver", default="lm", show_default=True, help="lm | gauss_newton | dogleg | bfgs | scipy")
+@click.option("--solver", default="lm", show_default=True, help="lm | lmb | gauss_newton | dogleg | bfgs | scipy")
 @click.option("--multistart", default=0, show_default=True, help="Further grid starts to polish.")
 @click.option("--max-steps", default=200, show_default=True)
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")

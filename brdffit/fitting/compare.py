@@ -71,12 +71,17 @@ class Report:
             ax.scatter(r["run_s"], r[metric], marker=markers[r["solver"]], color=colours[r["model"]], s=46,
                        edgecolors="black" if r["converged"] else "red", linewidths=0.6 if r["converged"] else 1.6,
                        zorder=3)
-            ax.annotate(f"{r['model']}/{r['solver']}" + ("" if len({x['loss'] for x in rows}) == 1 else f"/{r['loss']}"),
-                        (r["run_s"], r[metric]), fontsize=6.5, xytext=(4, 3), textcoords="offset points")
         front = []
         for r in sorted(rows, key=lambda r: (r["run_s"], r[metric])):
             if not front or r[metric] < front[-1][metric]:
                 front.append(r)
+        # Colour = model, marker = solver (legend); text labels only on the Pareto front, where
+        # the choice is made (labelling every point makes an unreadable pile).
+        several_losses = len({x["loss"] for x in rows}) > 1
+        for i, r in enumerate(front):
+            label = f"{r['model']} / {r['solver']}" + (f" / {r['loss']}" if several_losses else "")
+            ax.annotate(label, (r["run_s"], r[metric]), fontsize=7.5, xytext=(6, 6 if i % 2 else -10),
+                        textcoords="offset points", bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
         if len(front) > 1:
             ax.plot([r["run_s"] for r in front], [r[metric] for r in front], "k--", lw=0.8, zorder=2,
                     label="Pareto front")
@@ -123,7 +128,7 @@ def _row(r: FitResult, all_losses: dict[str, float]) -> dict[str, Any]:
 def compare(
     measurement: Measurement,
     models: Sequence[str] | None = None,
-    solvers: Sequence[str] = ("lm", "dogleg", "bfgs", "scipy"),
+    solvers: Sequence[str] = ("lm", "lmb", "dogleg", "bfgs", "scipy"),
     losses: Sequence[str] = ("log",),
     *,
     progress: Callable[[str], None] | None = None,
