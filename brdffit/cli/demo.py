@@ -12,9 +12,11 @@ from . import cli
               help="Folder for the results (written atomically).")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 def demo(out: str, force: bool) -> int:
-    """Run load, info, convert and a table plot on the sample measurement in data/."""
+    """The whole pipeline on the sample in data/: load, info, convert, fit, compare, validate."""
+    from .._files import check_target
     from ..demo import run_demo
+    from . import EXIT_NOT_CONVERGED, EXIT_OK
 
+    check_target(out, force)  # before any work
     written = run_demo(out, force=force)
-    click.echo(f"demo finished: {len(written)} files in {out}")
-    return 0
+    return EXIT_OK if written.pop("converged") else EXIT_NOT_CONVERGED
