@@ -2,8 +2,11 @@
 
 Pipeline of one fit: ``problem.prepare`` (exclude and count invalid samples, normalise weights)
 -> ``init.best_starts`` (variable-projection grid: nonlinear parameters on a coarse grid, linear
-ones by bounded least squares) -> a compiled optimistix solve on unconstrained axes (exact
-forward-mode Jacobians, float64) -> ``FitResult`` with metrics and standard errors.
+ones by bounded least squares) -> a compiled solve (exact forward-mode Jacobians, float64):
+optimistix ``lm`` / ``gauss_newton`` / ``dogleg`` / ``bfgs`` on the fold-transformed axes with an
+active set for optima on bounds, brdffit's own projected Levenberg-Marquardt ``lmb`` on the
+bounded values (the fastest, see benchmarks/bench_fit.py), or scipy ``least_squares`` (TRF) as
+the reference -> ``FitResult`` with metrics and standard errors.
 """
 
 from __future__ import annotations

@@ -34,7 +34,9 @@ class FitResult:
     steps: int
     converged: bool
     status: str
-    seconds: dict[str, float]  # "init", "compile", "run" (init is included in neither)
+    #: "compile" (XLA compilation, 0 when a cached solver served this shape), "run" (work after
+    #: compilation), "init" (the part of compile + run spent on the start grid).
+    seconds: dict[str, float]
     solver: str
     data_name: str
     n_used: int
