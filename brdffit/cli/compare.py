@@ -28,7 +28,7 @@ def print_report(report, loss: str, console) -> None:
     for r in sorted(report.rows, key=lambda r: r[f"loss_{loss}"]):
         table.add_row(r["model"], r["solver"], r["loss"], str(r["n_params"]), f"{r[f'loss_{loss}']:.4g}",
                       f"{r['run_s']:.3f}", f"{r['compile_s']:.2f}", str(r["steps"]),
-                      "ok" if r["converged"] else f"[red]{r['status']}[/]")
+                      "ok" if r["converged"] else "[red]not converged[/]")
     console.print(table)
 
 
@@ -79,6 +79,6 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
         report.to_csv(tmp / "report.csv")
         report.to_json(tmp / "report.json")
         report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
-    print_report(report, losses[0], Console())
+    print_report(report, losses[0], Console(width=max(Console().width, 110)))
     console.print(f"wrote {out}/report.csv, {out}/report.json, {out}/pareto.png")
     return EXIT_OK if all(r["converged"] for r in report.rows) else EXIT_NOT_CONVERGED
