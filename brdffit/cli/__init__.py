@@ -8,6 +8,7 @@ Each sub-command lives in its own module of this package and registers itself on
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
@@ -70,5 +71,19 @@ def main(argv: list[str] | None = None) -> int:
     return int(result or 0)
 
 
+def entry() -> None:
+    """The ``brdffit`` executable: ``main()``, then a fast exit.
+
+    Everything a command writes is closed (and atomically renamed) before ``main`` returns, so the
+    interpreter's teardown of JAX and Dr.Jit (about 0.4 s, measured with ``brdffit validate``)
+    does nothing for the user; the executable skips it after flushing its output streams. Code
+    that calls :func:`main` in-process keeps the normal interpreter exit.
+    """
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()
