@@ -55,9 +55,8 @@ def beckmann_ndf(h, alpha):
     return jnp.exp(log_d)
 
 
-def microfacet_lobe(p, wi, wo, d):
-    """ks F G D / (4 (n.l)(n.v)) with V-cavity G and Schlick F, given D (N, 1)."""
-    h = m.half_vector(wi, wo)
+def microfacet_lobe(p, wi, wo, h, d):
+    """ks F G D / (4 (n.l)(n.v)) with V-cavity G and Schlick F, given the half vector h and D (N, 1)."""
     cl, cv = m.cos_theta(wi), m.cos_theta(wo)
     vh = m.dot(wo, h)
     g = m.v_cavity_g(jnp.maximum(h[..., 2:3], 0.0), cl, cv, vh)
@@ -66,8 +65,8 @@ def microfacet_lobe(p, wi, wo, d):
 
 
 def formula(p, wi, wo):
-    d = beckmann_ndf(m.half_vector(wi, wo), p["alpha"])
-    return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, d)
+    h = m.half_vector(wi, wo)
+    return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, h, beckmann_ndf(h, p["alpha"]))
 
 
 MODEL = Model(

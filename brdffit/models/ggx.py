@@ -63,7 +63,7 @@ def specular_lobe(p, wi, wo):
     alpha = p["alpha"]
     d = ggx_ndf(h, alpha)
     g = smith_g1(wi, alpha) * smith_g1(wo, alpha)
-    f = m.schlick_fresnel(p["f0"], jnp.sum(h * wi, axis=-1, keepdims=True))
+    f = m.schlick_fresnel(p["f0"], m.dot(wi, h))
     return p["ks"] * f * g * d / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
 
 

@@ -55,8 +55,8 @@ def gaussian_facets(h, width):
 
 
 def formula(p, wi, wo):
-    d = gaussian_facets(m.half_vector(wi, wo), p["m"])
-    return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, d)
+    h = m.half_vector(wi, wo)
+    return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, h, gaussian_facets(h, p["m"]))
 
 
 MODEL = Model(

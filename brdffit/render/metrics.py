@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from jaxtyping import Float
 
+from ..io.images import linear_to_srgb
+
 
 def exposure(reference: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Scale that maps the 99.5th percentile of the reference (largest channel) to 1."""
@@ -29,14 +31,9 @@ def exposure(reference: np.ndarray, mask: np.ndarray | None = None) -> float:
     return 1.0 / level if level > 0 else 1.0
 
 
-def srgb_encode(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
 def tonemap(img: np.ndarray, scale: float) -> np.ndarray:
     """Linear radiance -> display sRGB in [0, 1] with a fixed exposure ``scale``."""
-    return srgb_encode(np.nan_to_num(np.asarray(img, np.float64) * scale, nan=0.0, posinf=1.0, neginf=0.0))
+    return linear_to_srgb(np.nan_to_num(np.asarray(img, np.float64) * scale, nan=0.0, posinf=1.0, neginf=0.0))
 
 
 def luminance(img: np.ndarray) -> np.ndarray:
