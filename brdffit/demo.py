@@ -10,6 +10,8 @@ written into a temporary folder that replaces ``out`` only when all steps succee
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
@@ -70,11 +72,17 @@ DEMO_MODELS = ("lambert", "blinn_phong", "ggx", "lambert+ggx+ggx")
 DEMO_SOLVERS = ("lm", "scipy")
 
 
-def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128) -> dict[str, Path]:
+@dataclasses.dataclass(frozen=True)
+class DemoResult:
+    files: dict[str, Path]  # written files by role
+    converged: bool  # did the demo's fit converge (the CLI exits 1 when not)
+
+
+def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128) -> DemoResult:
     """The whole pipeline on the sample, into ``out``: load + info, convert, table plot, fit of the
     generating model (Lambert + two GGX lobes) from defaults, error against run time for a few
     models and solvers, and a Mitsuba validation of the fit against the tabulated measurement.
-    Returns the written files by role; ``written["converged"]`` is absent, see :func:`demo_exit`."""
+    Returns the written files by role and whether the fit converged."""
     from rich.console import Console
 
     from ._files import atomic_dir
@@ -130,10 +138,9 @@ def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128
         console.print(repr(validation), soft_wrap=True)
         written["validation"] = out / "validation"
         written["metrics_json"] = out / "validation" / "metrics.json"
-        written["converged"] = result.converged
     console.rule("[bold]done")
     console.print(f"results in {out}/: table.png, fit/, compare/pareto.png, validation/ (EXRs, panels, metrics.json)")
-    return written
+    return DemoResult(files=written, converged=bool(result.converged))
 
 
 def _print_recovery(result, console) -> None:

@@ -18,5 +18,4 @@ def demo(out: str, force: bool) -> int:
     from . import EXIT_NOT_CONVERGED, EXIT_OK
 
     check_target(out, force)  # before any work
-    written = run_demo(out, force=force)
-    return EXIT_OK if written.pop("converged") else EXIT_NOT_CONVERGED
+    return EXIT_OK if run_demo(out, force=force).converged else EXIT_NOT_CONVERGED
