@@ -24,16 +24,44 @@ from ..measurement import Measurement
 from ._common import query_directions
 
 MAGIC = b"tensor_file\0"
-#: Mitsuba ``Struct::Type`` codes -> bytes per element: Invalid = 0, UInt8, Int8, UInt16, Int16,
-#: UInt32, Int32, UInt64, Int64, Float16, Float32, Float64 (the RGL files store 1, 5 and 10).
-_DTYPE_SIZE = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 8, 8: 8, 9: 2, 10: 4, 11: 8}
-#: fields the ``measured`` plugin reads in an RGB variant
-REQUIRED = ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "rgb", "valid")
+#: Mitsuba ``Struct::Type`` codes -> numpy dtype: Invalid = 0, UInt8, Int8, UInt16, Int16, UInt32,
+#: Int32, UInt64, Int64, Float16, Float32, Float64 (the RGL files store 1, 5 and 10).
+_DTYPES = {1: "u1", 2: "i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4", 7: "<u8", 8: "<i8", 9: "<f2", 10: "<f4", 11: "<f8"}
+_UINT8, _FLOAT32 = 1, 10
+#: what Mitsuba's ``measured`` plugin (RGB variant) reads: field -> (element type, number of axes).
+#: The plugin indexes these arrays with one another's sizes and builds sampling tables (Marginal2D)
+#: from them, in C++, without bounds checks: anything it reads must be verified here first.
+REQUIRED = {
+    "description": (_UINT8, 1),
+    "theta_i": (_FLOAT32, 1),
+    "phi_i": (_FLOAT32, 1),
+    "ndf": (_FLOAT32, 2),
+    "sigma": (_FLOAT32, 2),
+    "vndf": (_FLOAT32, 4),
+    "luminance": (_FLOAT32, 4),
+    "rgb": (_FLOAT32, 5),
+    "jacobian": (_UINT8, 1),
+}
+#: distributions the plugin turns into CDFs: finite and non-negative (``rgb`` may dip slightly below 0)
+_NON_NEGATIVE = ("ndf", "sigma", "vndf", "luminance")
+_MAX_FIELDS = 1000
 
 
-def check_tensor_file(path: Path) -> dict[str, tuple[int, tuple[int, ...]]]:
-    """Validate a tensor_file's header and field table; return name -> (dtype, shape)."""
-    data = Path(path).read_bytes()
+def check_tensor_file(path: str | Path) -> dict[str, tuple[int, tuple[int, ...]]]:
+    """Verify an RGL ``.bsdf`` completely before Mitsuba's ``measured`` plugin may read it.
+
+    Header (magic, version 1.0), the field table (names, element types, axes, shapes that agree
+    with one another as the plugin assumes), every field's bytes inside the file, and the values
+    the plugin computes with (finite; distributions non-negative; angles sorted and in range).
+    Returns name -> (type code, shape); raises ``InputError`` naming the file otherwise.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "is a folder, not an RGL tensor_file .bsdf")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
     size = len(data)
     if size == 0:
         raise InputError(path, "empty file (expected an RGL tensor_file .bsdf)")
@@ -54,44 +82,98 @@ def check_tensor_file(path: Path) -> dict[str, tuple[int, tuple[int, ...]]]:
     if (major, minor) != (1, 0):
         raise InputError(path, f"unsupported tensor_file version {major}.{minor} (expected 1.0)")
     (n_fields,) = take("<I")
-    if not 0 < n_fields < 1000:
+    if not 0 < n_fields < _MAX_FIELDS:
         raise InputError(path, f"implausible tensor_file field count {n_fields}")
-    fields: dict[str, tuple[int, tuple[int, ...]]] = {}
+    table: dict[str, tuple[int, tuple[int, ...], int]] = {}
     for _ in range(n_fields):
         (name_len,) = take("<H")
         if pos + name_len > size:
             raise InputError(path, f"truncated tensor_file header at byte {pos} of {size}")
-        name = data[pos : pos + name_len].decode("ascii", errors="replace")
+        try:
+            name = data[pos : pos + name_len].decode("ascii")
+        except UnicodeDecodeError:
+            raise InputError(path, f"garbled tensor_file field table (non-ASCII field name at byte {pos})") from None
         pos += name_len
         ndim, dtype, offset = take("<HBQ")
-        shape = take(f"<{ndim}Q") if ndim else ()
-        if dtype not in _DTYPE_SIZE:
+        if ndim > 8:
+            raise InputError(path, f"field {name!r} declares {ndim} axes (garbled field table?)")
+        shape = tuple(int(s) for s in take(f"<{ndim}Q")) if ndim else ()
+        if dtype not in _DTYPES:
             raise InputError(path, f"field {name!r} has unknown element type {dtype}")
-        nbytes = _DTYPE_SIZE[dtype] * int(np.prod(shape, dtype=np.float64))
-        if offset + nbytes > size:
-            raise InputError(path, f"truncated: field {name!r} needs bytes {offset}..{offset + nbytes}, file has {size}")
-        fields[name] = (dtype, tuple(int(s) for s in shape))
-    missing = [f for f in REQUIRED if f not in fields]
+        if name in table:
+            raise InputError(path, f"field {name!r} appears twice in the field table")
+        table[name] = (dtype, shape, offset)
+    header_end = pos
+    for name, (dtype, shape, offset) in table.items():
+        # Python integers: a garbled shape cannot overflow (it is just far larger than the file)
+        nbytes = np.dtype(_DTYPES[dtype]).itemsize * _product(shape)
+        if offset < header_end or offset + nbytes > size:
+            raise InputError(path, f"truncated or garbled: field {name!r} declares bytes {offset}..{offset + nbytes}, "
+                                   f"the file has {size} (header ends at {header_end})")
+    missing = [f for f in REQUIRED if f not in table]
     if missing:
         raise InputError(path, f"tensor_file lacks the field(s) {', '.join(missing)} of an RGL RGB material")
-    rgb = fields["rgb"][1]
-    if len(rgb) != 5 or rgb[2] != 3:
-        raise InputError(path, f"field 'rgb' has shape {rgb}, expected (phi_i, theta_i, 3, n, n)")
-    # shapes the plugin indexes with one another: a mismatch would read out of bounds in C++
-    n_phi, n_theta = rgb[0], rgb[1]
+    for name, (dtype, ndim) in REQUIRED.items():
+        got_type, shape, _ = table[name]
+        if got_type != dtype or len(shape) != ndim:
+            raise InputError(path, f"field {name!r} is {_DTYPES[got_type]} with shape {shape}, expected "
+                                   f"{_DTYPES[dtype]} with {ndim} axes")
+    shapes = {name: table[name][1] for name in REQUIRED}
+    n_phi, n_theta = shapes["phi_i"][0], shapes["theta_i"][0]
+    rgb = shapes["rgb"]
+    n = rgb[3]
     expected = {
-        "phi_i": (n_phi,),
-        "theta_i": (n_theta,),
-        "luminance": (n_phi, n_theta, rgb[3], rgb[4]),
+        "rgb": (n_phi, n_theta, 3, n, n),
+        "luminance": (n_phi, n_theta, n, n),
+        "vndf": (n_phi, n_theta) + shapes["vndf"][2:],
+        "jacobian": (1,),
     }
-    for field, shape in expected.items():
-        if fields[field][1] != shape:
-            raise InputError(path, f"field {field!r} has shape {fields[field][1]}, expected {shape} to match 'rgb' {rgb}")
-    if fields["vndf"][1][:2] != (n_phi, n_theta) or len(fields["vndf"][1]) != 4:
-        raise InputError(path, f"field 'vndf' has shape {fields['vndf'][1]}, expected ({n_phi}, {n_theta}, n, n)")
-    if int(np.prod(fields["valid"][1])) != rgb[3] * rgb[4]:
-        raise InputError(path, f"field 'valid' has shape {fields['valid'][1]}, expected {rgb[3] * rgb[4]} entries")
-    return fields
+    for name, shape in expected.items():
+        if shapes[name] != shape:
+            raise InputError(path, f"field {name!r} has shape {shapes[name]}, expected {shape} (from phi_i, theta_i, rgb)")
+    too_small = [name for name in ("ndf", "sigma", "vndf", "luminance")
+                 if min(shapes[name][-2:]) < 2] + (["theta_i"] if n_theta < 2 else []) + (["phi_i"] if n_phi < 1 else [])
+    if too_small:
+        raise InputError(path, f"field(s) {', '.join(too_small)} too small to interpolate")
+
+    def values(name: str) -> np.ndarray:
+        dtype, shape, offset = table[name]
+        return np.frombuffer(data, dtype=_DTYPES[dtype], count=_product(shape), offset=offset)
+
+    for name in ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "rgb"):
+        v = values(name)
+        if not np.all(np.isfinite(v)):
+            raise InputError(path, f"field {name!r} holds {int(np.sum(~np.isfinite(v)))} non-finite value(s)")
+        if name in _NON_NEGATIVE and v.min() < 0:
+            raise InputError(path, f"field {name!r} holds negative values (min {float(v.min()):.4g}); it is a distribution")
+    theta, phi = values("theta_i").astype(np.float64), values("phi_i").astype(np.float64)
+    if theta.min() < 0 or theta.max() > np.pi / 2 + 1e-4 or np.any(np.diff(theta) <= 0):
+        raise InputError(path, "field 'theta_i' must rise strictly within 0..pi/2")
+    if phi.min() < -np.pi - 1e-4 or phi.max() > 2 * np.pi + 1e-4 or np.any(np.diff(phi) <= 0):
+        raise InputError(path, "field 'phi_i' must rise strictly within -pi..2pi")
+    if n_phi > 2 and round(2 * np.pi / (phi[-1] - phi[0])) > 4:
+        raise InputError(path, "field 'phi_i' covers too small a range of azimuths")
+    return {name: (dtype, shape) for name, (dtype, shape, _) in table.items()}
+
+
+def _product(shape: tuple[int, ...]) -> int:
+    out = 1
+    for s in shape:
+        out *= int(s)
+    return out
+
+
+def load_measured(path: str | Path):
+    """Mitsuba's ``measured`` BSDF for an RGL file, verified first (the one door to the plugin)."""
+    from .._mitsuba import mitsuba
+
+    path = Path(path)
+    check_tensor_file(path)
+    mi = mitsuba()
+    try:
+        return mi.load_dict({"type": "measured", "filename": str(path)})
+    except Exception as exc:  # noqa: BLE001 - Mitsuba's own parse errors become one line
+        raise InputError(path, f"Mitsuba's measured plugin cannot read it: {' '.join(str(exc).split())[:300]}") from None
 
 
 def eval_mitsuba(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
@@ -99,7 +181,7 @@ def eval_mitsuba(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
     from .._mitsuba import mitsuba
 
     mi = mitsuba()
-    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
+    bsdf = load_measured(path)
     si = mi.SurfaceInteraction3f()
     si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
     si.wi = mi.Vector3f(np.ascontiguousarray(view.T, dtype=np.float32))
@@ -114,8 +196,8 @@ def eval_mitsuba(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
 def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     """Sample an RGL ``.bsdf`` at ``wi`` (light), ``wo`` (view): the UBO-81 pairs by default."""
     path = Path(path)
-    fields = check_tensor_file(path)
     light, view, grid = query_directions(wi, wo)
+    fields = check_tensor_file(path)
     try:
         f = eval_mitsuba(path, light, view)
     except InputError:

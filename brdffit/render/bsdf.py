@@ -195,17 +195,15 @@ def callback_bsdf(brdf: BrdfFn, label: str = "callback"):
 
 
 def measured_bsdf(path: str | Path):
-    """Mitsuba's built-in ``measured`` plugin for an RGL ``.bsdf`` file."""
+    """Mitsuba's built-in ``measured`` plugin for an RGL ``.bsdf`` file, verified before the plugin
+    reads it (:func:`brdffit.io.rgl.load_measured`)."""
     from ..errors import InputError
+    from ..io.rgl import load_measured
 
-    mi = mitsuba()
     path = Path(path)
     if not path.is_file():
         raise InputError(str(path), "no such file")
-    try:
-        return mi.load_dict({"type": "measured", "filename": str(path)})
-    except Exception as exc:  # Mitsuba reports a bad tensor file as a RuntimeError
-        raise InputError(str(path), f"not a readable RGL tensor_file: {exc}") from None
+    return load_measured(path)
 
 
 @contextlib.contextmanager
@@ -329,6 +327,9 @@ def as_source(obj) -> Source:
         if not path.exists():
             raise InputError(str(path), "no such file or folder")
         if path.suffix.lower() == ".bsdf":
+            from ..io.rgl import check_tensor_file
+
+            check_tensor_file(path)  # bad input is reported now, before any work
             return Source("rgl", path.stem, path=path)
         import brdffit
 
