@@ -1,15 +1,42 @@
-"""Atomic results (SPEC 7): a result appears complete or not at all, and replaces an existing one
-only when asked (``force``)."""
+"""Results are written atomically, and nothing is lost silently (SPEC 10).
+
+- A result (file or folder) is built under a hidden name beside its target and appears complete
+  or not at all; an existing result is replaced only when asked (``force``), and the replacement
+  is an atomic exchange (Linux ``renameat2(RENAME_EXCHANGE)``): at every instant the target holds
+  the complete old or the complete new result.
+- :func:`reserve` takes an exclusive lock on the target (``flock`` on a hidden lock file beside
+  it) before the work: of several runs writing the same place at once one proceeds, the others
+  get a ``UsageError`` (exit 2). Taking the lock is also the check that the place is writable,
+  so an unwritable output is reported before the work, not after it.
+- Hidden entries ``.NAME.brdffit-*`` are this module's. A run killed at any point can leave some
+  behind; the next run on the same target, holding the lock, removes them (and puts back an old
+  result that a non-atomic fallback swap had set aside).
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
+import fcntl
 import os
 import shutil
 import tempfile
+import threading
 from pathlib import Path
 
 from .errors import UsageError
+
+_MARK = ".brdffit-"
+_RENAME_NOREPLACE, _RENAME_EXCHANGE = 1, 2
+_AT_FDCWD = -100
+#: targets this process holds a lock on: absolute path -> nesting count
+_HELD: dict[str, int] = {}
+_HELD_GUARD = threading.Lock()
+
+
+def _hidden(path: Path, what: str) -> str:
+    return f".{path.name}{_MARK}{what}"
 
 
 def _usual_mode(path: Path, folder: bool) -> None:
@@ -19,45 +46,161 @@ def _usual_mode(path: Path, folder: bool) -> None:
     os.chmod(path, (0o777 if folder else 0o666) & ~umask)
 
 
-def check_target(path: str | os.PathLike, force: bool) -> Path:
+def check_target(path: str | os.PathLike, force: bool, folder: bool | None = None) -> Path:
+    """``path`` may be written: it does not exist (or ``force``), it is of the right kind
+    (``folder`` True/False; None: either), and no part of its parent is a file."""
     path = Path(path)
-    if path.exists() and not force:
-        raise UsageError(f"{path}: already exists (use --force to replace it)")
+    for parent in path.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise UsageError(f"{path}: cannot write here, {parent} is a file, not a folder")
+            break
+    if path.is_symlink() or path.exists():
+        if folder is False and path.is_dir():
+            raise UsageError(f"{path}: is a folder; the output here is a file (give a file name)")
+        if folder is True and not path.is_dir():
+            raise UsageError(f"{path}: is a file; the output here is a folder")
+        if not force:
+            raise UsageError(f"{path}: already exists (use --force to replace it)")
     return path
+
+
+def _rename2(src: Path, dst: Path, flags: int) -> bool:
+    """``renameat2``; False where the system or the file system does not offer it."""
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if fn(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), flags) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    if err == errno.EEXIST:
+        raise UsageError(f"{dst}: already exists (use --force to replace it)")
+    raise OSError(err, os.strerror(err), str(dst))
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
+
+def _commit(tmp: Path, path: Path, force: bool) -> None:
+    """Move the finished ``tmp`` onto ``path``; the target is never missing or partial."""
+    if not (path.is_symlink() or path.exists()):
+        if not _rename2(tmp, path, _RENAME_NOREPLACE):
+            os.rename(tmp, path)
+        return
+    if not force:
+        raise UsageError(f"{path}: already exists (use --force to replace it)")
+    if tmp.is_file() and path.is_file():
+        os.replace(tmp, path)  # atomic for files
+        return
+    if _rename2(tmp, path, _RENAME_EXCHANGE):  # tmp now holds the old result
+        _remove(tmp)
+        return
+    # no atomic exchange here: set the old result aside under a name the next run restores from
+    old = path.parent / (_hidden(path, "old-") + os.urandom(4).hex())
+    os.rename(path, old)
+    os.rename(tmp, path)
+    _remove(old)
+
+
+def _clean_leftovers(path: Path) -> None:
+    """Remove what killed runs left beside ``path`` (the caller holds the lock)."""
+    prefix = f".{path.name}{_MARK}"
+    lock = _hidden(path, "lock")
+    leftovers = [p for p in path.parent.iterdir() if p.name.startswith(prefix) and p.name != lock]
+    olds = sorted(p for p in leftovers if p.name.startswith(_hidden(path, "old-")))
+    if olds and not (path.is_symlink() or path.exists()):
+        os.rename(olds[0], path)  # a complete old result set aside by a swap that was cut short
+        leftovers.remove(olds[0])
+    for p in leftovers:
+        _remove(p)
+
+
+@contextlib.contextmanager
+def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = None):
+    """Hold ``path`` for this run: checked, its parent created and writable, locked against other
+    runs, leftovers of killed runs removed. Nested calls for the same path share the lock."""
+    path = check_target(path, force, folder)
+    key = os.path.abspath(path)
+    with _HELD_GUARD:
+        nested = key in _HELD
+        if nested:
+            _HELD[key] += 1
+    if nested:
+        try:
+            yield path
+        finally:
+            with _HELD_GUARD:
+                _HELD[key] -= 1
+        return
+    parent = Path(key).parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        lock = parent / _hidden(path, "lock")
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot write here ({exc.strerror or exc}: {exc.filename or parent})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise UsageError(f"{path}: another brdffit run is writing it now") from None
+        # its previous holder may have removed the lock file between our open() and flock()
+        mine = os.fstat(fd)
+        try:
+            now = os.stat(lock)
+        except FileNotFoundError:
+            now = None
+        if now is None or (now.st_ino, now.st_dev) != (mine.st_ino, mine.st_dev):
+            raise UsageError(f"{path}: another brdffit run is writing it now")
+        _clean_leftovers(path)
+        check_target(path, force, folder)  # again, now that no other run can change it
+        with _HELD_GUARD:
+            _HELD[key] = 1
+        try:
+            yield path
+        finally:
+            with _HELD_GUARD:
+                del _HELD[key]
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(lock)  # still locked: a run that opened it meanwhile sees the inode change
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
 def atomic_file(path: str | os.PathLike, force: bool = False, suffix: str | None = None):
     """Yield a temporary path beside ``path``; on success it is renamed onto ``path``."""
-    path = check_target(path, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
-    os.close(fd)
-    _usual_mode(Path(tmp), folder=False)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    path = Path(path)
+    with reserve(path, force, folder=False):
+        fd, name = tempfile.mkstemp(prefix=_hidden(path, "new-"), suffix=suffix or path.suffix, dir=path.absolute().parent)
+        os.close(fd)
+        tmp = Path(name)
+        try:
+            _usual_mode(tmp, folder=False)
+            yield tmp
+            _commit(tmp, path, force)
+        finally:
+            _remove(tmp)
 
 
 @contextlib.contextmanager
 def atomic_dir(path: str | os.PathLike, force: bool = False):
     """Yield a temporary folder beside ``path``; on success it replaces ``path`` as a whole."""
-    path = check_target(path, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    _usual_mode(tmp, folder=True)
-    try:
-        yield tmp
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
-            os.replace(path, old / "x")
-            os.replace(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+    path = Path(path)
+    with reserve(path, force, folder=True):
+        tmp = Path(tempfile.mkdtemp(prefix=_hidden(path, "new-"), dir=path.absolute().parent))
+        try:
+            _usual_mode(tmp, folder=True)
+            yield tmp
+            _commit(tmp, path, force)
+        finally:
+            _remove(tmp)

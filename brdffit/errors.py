@@ -23,3 +23,7 @@ class UsageError(InputError):
 
     def __init__(self, problem: str):
         super().__init__(None, problem)
+
+
+class BrdffitWarning(UserWarning):
+    """Data that can be used but look suspect (e.g. every value negative); the CLI shows one line."""

@@ -1,21 +1,28 @@
 """``brdffit`` command line (SPEC 7).
 
 Exit status: 0 success; 1 a fit ran but did not converge (results still written, marked);
-2 bad input or usage (one line naming the file and the problem, no traceback unless --debug);
+2 bad input or usage (one line naming the file and the problem, no traceback unless --debug,
+which is accepted anywhere on the line); 130 interrupted (Ctrl-C; nothing half-written);
 3 an internal error (a bug: please report it with the --debug traceback).
+Warnings about suspect data are shown as one ``brdffit: warning:`` line each, after a successful
+run; library noise (NumPy RuntimeWarnings) only with --debug.
 Each sub-command lives in its own module of this package and registers itself on ``cli``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import sys
+import threading
+import warnings
 
 import click
 
-from ..errors import InputError
+from ..errors import BrdffitWarning, InputError, UsageError
 
-EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 # click >= 8.2 calls it NoArgsIsHelpError, older versions NoArgsIsHelp (an empty tuple catches nothing)
 _NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", getattr(click.exceptions, "NoArgsIsHelp", ()))
 
@@ -39,35 +46,90 @@ def _load_commands() -> None:
             importlib.import_module(f"{__name__}.{info.name}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the CLI and map errors to SPEC 7 exit statuses."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in argv
-    _load_commands()
+class Interrupted(BaseException):
+    """Ctrl-C while a command runs. Not a KeyboardInterrupt, so that click does not turn it into
+    its own "Aborted!"; like one, it unwinds through every ``finally`` (temporary results are
+    removed, locks released)."""
+
+
+@contextlib.contextmanager
+def _interrupts_raise():
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_sigint(signum, frame):
+        raise Interrupted()
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        result = cli.main(args=argv, prog_name="brdffit", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("brdffit: aborted", err=True)
-        return EXIT_BAD_INPUT
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def check_model(name: str, channels: int = 3):
+    """The model ``name`` (e.g. ``lambert+ggx``), or a usage error (exit 2) for names that cannot
+    make a model: unknown, ``lafortune0``, ``lafortune100000``, ``lambert+lambert``..."""
+    from ..fitting.problem import resolve_model
+
+    try:
+        return resolve_model(name, channels)
+    except InputError:
+        raise
+    except (KeyError, ValueError, OverflowError, MemoryError) as exc:
+        raise UsageError(f"--model {name!r}: {' '.join(str(exc).split()) or type(exc).__name__}") from None
+
+
+def _split_debug(argv: list[str]) -> tuple[list[str], bool]:
+    """``--debug`` anywhere before a ``--`` (before or after the sub-command)."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    debug = "--debug" in argv[:end]
+    return [a for a in argv[:end] if a != "--debug"] + argv[end:], debug
+
+
+def _show_warnings(caught, debug: bool) -> None:
+    seen = set()
+    for w in caught:
+        ours = issubclass(w.category, BrdffitWarning)
+        if not (ours or debug):
+            continue  # library noise (e.g. NumPy RuntimeWarnings): --debug shows it
+        line = f"brdffit: warning: {' '.join(str(w.message).split())}"
+        if line not in seen:
+            seen.add(line)
+            click.echo(line, err=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: run the CLI and map errors to SPEC 10 exit statuses."""
+    argv, debug = _split_debug(list(sys.argv[1:] if argv is None else argv))
+    _load_commands()
+    caught: list = []
+    try:
+        with warnings.catch_warnings(record=True) as caught, _interrupts_raise():
+            warnings.simplefilter("always")
+            result = cli.main(args=(["--debug"] if debug else []) + argv, prog_name="brdffit", standalone_mode=False)
+    except (Interrupted, KeyboardInterrupt, click.exceptions.Abort):
+        click.echo("brdffit: interrupted", err=True)
+        return EXIT_INTERRUPTED
     except _NO_ARGS_IS_HELP as exc:  # pragma: no cover - click version dependent
         click.echo(exc.format_message() if hasattr(exc, "format_message") else str(exc), err=True)
         return EXIT_BAD_INPUT
     except click.ClickException as exc:
-        click.echo(f"brdffit: {exc.format_message()}", err=True)
+        click.echo(f"brdffit: {' '.join(exc.format_message().split())}", err=True)
         return EXIT_BAD_INPUT
     except InputError as exc:
         if debug:
             raise
-        click.echo(f"brdffit: {exc}", err=True)
+        click.echo(f"brdffit: {' '.join(str(exc).split())}", err=True)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        click.echo("brdffit: interrupted", err=True)
-        return 130
     except Exception as exc:  # noqa: BLE001 - last line of defence: one line, not a traceback
         if debug:
             raise
-        click.echo(f"brdffit: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
+        message = " ".join(f"{type(exc).__name__}: {exc}".split())
+        click.echo(f"brdffit: internal error: {message} (run with --debug for the traceback)", err=True)
         return EXIT_INTERNAL
+    _show_warnings(caught, debug)
     return int(result or 0)
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from . import EXIT_NOT_CONVERGED, EXIT_OK, cli
+from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
 
 def _split(values: tuple[str, ...]) -> list[str]:
@@ -41,44 +41,52 @@ def print_report(report, loss: str, console) -> None:
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 def compare_command(source, models, solvers, losses, out, force) -> int:
     """Fit every model x solver x loss; table of errors and times, and a Pareto plot."""
+    import contextlib
+
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from .. import load
     from .. import models as _models
-    from .._files import atomic_dir, check_target
+    from .._files import atomic_dir, reserve
     from ..fitting.compare import compare
     from ..fitting.losses import check_loss
-    from ..fitting.problem import resolve_model
     from ..fitting.solve import check_solver
 
+    for option, given in (("--models", models), ("--solvers", solvers), ("--losses", losses)):
+        if given and not _split(given):  # e.g. --models ",,": refuse rather than run everything
+            raise click.UsageError(f"{option}: empty list")
     models = _split(models) or _models.names()
     solvers = [check_solver(s) for s in (_split(solvers) or ["lm", "lmb", "dogleg", "bfgs", "scipy"])]
     losses = [check_loss(x) for x in (_split(losses) or ["log"])]
     for name in models:
-        resolve_model(name, 3)
+        check_model(name)
     console = Console(stderr=True)
-    with console.status(f"loading {source}"):
-        m = load(source)
-    out = out or Path(f"compare-{m.name}")
-    check_target(out, force)
-    total = len(models) * len(solvers) * len(losses)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=console) as progress:
-        task = progress.add_task("fitting", total=total)
-        state = {"n": 0}
+    with contextlib.ExitStack() as stack:
+        if out is not None:  # checked, writable and locked before any work
+            stack.enter_context(reserve(out, force, folder=True))
+        with console.status(f"loading {source}"):
+            m = load(source)
+        if out is None:
+            out = Path(f"compare-{m.name}")
+            stack.enter_context(reserve(out, force, folder=True))
+        total = len(models) * len(solvers) * len(losses)
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console) as progress:
+            task = progress.add_task("fitting", total=total)
+            state = {"n": 0}
 
-        def step(label):
-            if state["n"]:
-                progress.advance(task)
-            state["n"] += 1
-            progress.update(task, description=f"fitting {label}")
+            def step(label):
+                if state["n"]:
+                    progress.advance(task)
+                state["n"] += 1
+                progress.update(task, description=f"fitting {label}")
 
-        report = compare(m, models, solvers, losses, progress=step)
-        progress.update(task, completed=total, description="done")
-    with atomic_dir(out, force) as tmp:
-        report.to_csv(tmp / "report.csv")
-        report.to_json(tmp / "report.json")
-        report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
+            report = compare(m, models, solvers, losses, progress=step)
+            progress.update(task, completed=total, description="done")
+        with atomic_dir(out, force) as tmp:
+            report.to_csv(tmp / "report.csv")
+            report.to_json(tmp / "report.json")
+            report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
     print_report(report, losses[0], Console(width=max(Console().width, 110)))
     console.print(f"wrote {out}/report.csv, {out}/report.json, {out}/pareto.png")
     return EXIT_OK if all(r["converged"] for r in report.rows) else EXIT_NOT_CONVERGED

@@ -15,15 +15,16 @@ from . import cli
 @click.option("--force", is_flag=True, help="Replace OUT if it exists.")
 def convert(source: str, out: str, force: bool) -> int:
     """Resample SOURCE onto the UBO-81 grid and write OUT (.exr or .npz), atomically."""
-    from .._files import check_target
+    from .._files import reserve
     from ..errors import UsageError
     from ..io import WRITERS, resample, save
 
     if Path(out).suffix.lower() not in WRITERS:
         raise UsageError(f"{out}: output must end in .exr or .npz")
-    check_target(out, force)  # fail before the (possibly long) read
-    m = resample(source, progress=True)
-    save(m, out, force=force)
+    # checked, writable and locked against other runs before the (possibly long) read
+    with reserve(out, force, folder=False):
+        m = resample(source, progress=True)
+        save(m, out, force=force)
     extra = ""
     if "extrapolated" in m.meta:
         extra = f"; {m.meta['extrapolated']} samples extrapolated (max {m.meta.get('max_extrapolation_deg', 0):.1f} deg)"

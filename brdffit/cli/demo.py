@@ -17,5 +17,5 @@ def demo(out: str, force: bool) -> int:
     from ..demo import run_demo
     from . import EXIT_NOT_CONVERGED, EXIT_OK
 
-    check_target(out, force)  # before any work
+    check_target(out, force, folder=True)  # before any work
     return EXIT_OK if run_demo(out, force=force).converged else EXIT_NOT_CONVERGED

@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import EXIT_NOT_CONVERGED, EXIT_OK, cli
+from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
 
 def plot_fit(measurement, result, path: Path) -> None:
@@ -71,8 +71,8 @@ def plot_fit(measurement, result, path: Path) -> None:
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx+ggx.")
 @click.option("--loss", default="log", show_default=True, help="l2 | cosine_l2 | log | cbrt | relative")
 @click.option("--solver", default="lm", show_default=True, help="lm | lmb | gauss_newton | dogleg | bfgs | scipy")
-@click.option("--multistart", default=0, show_default=True, help="Further grid starts to polish.")
-@click.option("--max-steps", default=200, show_default=True)
+@click.option("--multistart", type=click.IntRange(min=0), default=0, show_default=True, help="Further grid starts to polish.")
+@click.option("--max-steps", type=click.IntRange(min=1), default=200, show_default=True)
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
@@ -80,25 +80,30 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
     from rich.console import Console
 
     from .. import load
-    from .._files import atomic_dir, check_target
+    import contextlib
+
+    from .._files import atomic_dir, reserve
     from ..fitting import fit
     from ..fitting.losses import check_loss
-    from ..fitting.problem import resolve_model
     from ..fitting.solve import check_solver
 
     check_loss(loss)
     check_solver(solver)
-    resolve_model(model, 3)  # unknown model -> usage error before any work
+    check_model(model)  # unknown or impossible model -> usage error before any work
     console = Console(stderr=True)
-    with console.status(f"loading {source}"):
-        m = load(source)
-    out = out or Path(f"fit-{m.name}-{model.replace('+', '_')}")
-    check_target(out, force)
-    with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
-        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
-    with atomic_dir(out, force) as tmp:
-        r.to_json(tmp / "fit.json")
-        plot_fit(m, r, tmp / "fit.png")
+    with contextlib.ExitStack() as stack:
+        if out is not None:  # checked, writable and locked before any work
+            stack.enter_context(reserve(out, force, folder=True))
+        with console.status(f"loading {source}"):
+            m = load(source)
+        if out is None:
+            out = Path(f"fit-{m.name}-{model.replace('+', '_')}")
+            stack.enter_context(reserve(out, force, folder=True))
+        with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
+            r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
+        with atomic_dir(out, force) as tmp:
+            r.to_json(tmp / "fit.json")
+            plot_fit(m, r, tmp / "fit.png")
     console.print(repr(r), soft_wrap=True)
     console.print(f"wrote {out}/fit.json, {out}/fit.png")
     if not r.converged:

@@ -40,36 +40,39 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from .._files import check_target
+    from .._files import reserve
     from ..errors import InputError
 
     console = Console(stderr=True)
     if not Path(source).exists():
         raise InputError(source, "no such file or folder")
-    if not Path(fit_json).is_file():
+    if not Path(fit_json).exists():
         raise InputError(fit_json, "no such file")
     out_path = Path(out) if out is not None else Path(fit_json).resolve().parent / "validate"
-    check_target(out_path, force)  # before any work: nothing is written on bad usage
+    # checked, writable and locked against other runs before any work: nothing is written on bad usage
+    with reserve(out_path, force, folder=True):
+        from ..render import default_lights, validate
+        from ..render.scene import DEFAULT_SPP
+        from ..render.validate import as_fit, as_source
 
-    from ..render import default_lights, validate
-    from ..render.scene import DEFAULT_SPP
-    from ..render.validate import as_fit, as_source
+        # Read both inputs before any progress is shown: bad input is one line, nothing else.
+        from ..fitting.result import FitResult
 
-    # Read both inputs before any progress is shown: bad input is one line, nothing else.
-    reference, fit = as_source(source), as_fit(fit_json)
+        # FIT.json is a fit file whatever its name: checked as one (not guessed as a measurement)
+        reference, fit = as_source(source), as_fit(FitResult.from_json(Path(fit_json)))
 
-    t_import = time.perf_counter() - t0
-    stages = ("render reference", "render fit", "metrics", "panels")
-    with Progress(TextColumn("{task.description:<17}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), console=console, transient=False) as bar:
-        tasks = {s: bar.add_task(s, total=n_lights + (1 if s == "panels" else 0)) for s in stages}
+        t_import = time.perf_counter() - t0
+        stages = ("render reference", "render fit", "metrics", "panels")
+        with Progress(TextColumn("{task.description:<17}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), console=console, transient=True) as bar:
+            tasks = {s: bar.add_task(s, total=n_lights + (1 if s == "panels" else 0)) for s in stages}
 
-        def progress(stage, k, n):
-            if stage in tasks:
-                bar.update(tasks[stage], completed=k, total=n)
+            def progress(stage, k, n):
+                if stage in tasks:
+                    bar.update(tasks[stage], completed=k, total=n)
 
-        v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
-                     spp=spp or DEFAULT_SPP, progress=progress)
+            v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
+                         spp=spp or DEFAULT_SPP, progress=progress)
     o = v.metrics["overall"]
     click.echo(
         f"{out_path}: {len(v.files)} files; rmse {o['rmse']:.4g}, relative rmse {o['relative_rmse']:.3g}, "

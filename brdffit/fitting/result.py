@@ -14,6 +14,7 @@ from jaxtyping import Float
 
 from ..errors import InputError
 from ..models.base import Model
+from .fitfile import check_fit_document, parse_fit_text
 
 FORMAT = "brdffit.fit/1"
 
@@ -102,30 +103,19 @@ class FitResult:
         text = source
         if isinstance(source, os.PathLike) or (isinstance(source, str) and not source.lstrip().startswith("{")):
             path = Path(source)
+            if path.is_dir():
+                raise InputError(path, "is a folder, not a fit file (JSON)")
             try:
-                text = path.read_text()
+                text = path.read_bytes()
             except OSError as exc:
                 raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(path, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        d = parse_fit_text(text, path)
         return cls.from_dict(d, path=path)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], path=None) -> "FitResult":
-        from ..models import get
-
-        try:
-            name, channels, params = d["model"], int(d.get("channels", 3)), d["params"]
-        except (KeyError, TypeError):
-            raise InputError(path, "not a brdffit fit result: needs 'model' and 'params'") from None
-        try:
-            model = get(name)
-        except KeyError as exc:
-            raise InputError(path, f"unknown model {name!r}") from exc
-        if model.channels != channels:
-            model = model.with_channels(channels)
+        model = check_fit_document(d, path)  # every field checked: bad files are one line, not a crash later
+        params = d["params"]
         try:
             checked = model.check_params({k: np.asarray(v, dtype=np.float64) for k, v in params.items()})
         except ValueError as exc:
