@@ -18,6 +18,8 @@ from .grid import UBO_SIZE
 
 
 def _as_float_array(x) -> Array:
+    if np.iscomplexobj(x):  # casting would drop the imaginary part with only a warning
+        raise ValueError("a Measurement holds real numbers, not complex values")
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
 

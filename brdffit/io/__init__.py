@@ -104,7 +104,28 @@ def load(path: str | os.PathLike, *, format: str | None = None, progress: bool =
         raise InputError(path, f"cannot read as {fmt}: {type(exc).__name__}: {_one_line(exc)}") from exc
     finally:
         PROGRESS.reset(token)
+    check_measurement(m, path)
     return m
+
+
+def check_measurement(m: Measurement, path) -> None:
+    """The one acceptance rule for what every reader returns (``info``, ``convert`` and ``fit``
+    agree): at least one usable sample (``Measurement.valid_mask``), else ``InputError``; data
+    that can be used but look wrong get one :class:`~brdffit.errors.BrdffitWarning`."""
+    import warnings
+
+    from ..errors import BrdffitWarning
+
+    valid = m.valid_mask()
+    if not valid.any():
+        raise InputError(path, f"no usable sample among {m.n_samples}: every value is NaN/inf, has weight 0 "
+                               "or a direction below the horizon")
+    values = np.asarray(m.values)[valid]
+    if np.all(values < 0):
+        warnings.warn(BrdffitWarning(f"{path}: every valid value is negative (min {values.min():.4g}): "
+                                     "a BRDF is >= 0; wrong sign or offset?"), stacklevel=2)
+    elif np.all(values == 0):
+        warnings.warn(BrdffitWarning(f"{path}: every valid value is 0"), stacklevel=2)
 
 
 def save(m: Measurement, path: str | os.PathLike, *, force: bool = False) -> Path:
@@ -165,4 +186,4 @@ def summary(m: Measurement) -> dict:
     }
 
 
-__all__ = ["EXTENSIONS", "READERS", "detect_format", "load", "resample", "save", "summary"]
+__all__ = ["EXTENSIONS", "READERS", "check_measurement", "detect_format", "load", "resample", "save", "summary"]

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import tempfile
+
 import numpy as np
 
 from ..errors import UsageError
@@ -67,3 +72,34 @@ def meta_from_json(text: str) -> dict:
     out = {k: doc[k] for k in META_FIELDS if k in doc}
     out["extra"] = {str(k): _from_jsonable(v) for k, v in doc.get("extra", [])}
     return out
+
+
+@contextlib.contextmanager
+def native_stderr_captured():
+    """Capture what a C/C++ library writes straight to file descriptors 1 and 2 (the OpenEXR
+    library prints its own messages for a damaged file, some on stdout): the CLI's one line must
+    be the only one. Yields a list that holds the captured text afterwards."""
+    captured: list[str] = []
+    streams = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            streams.append((stream, stream.fileno()))
+        except (AttributeError, OSError, ValueError):  # replaced by an object without a descriptor
+            pass
+    with contextlib.ExitStack() as stack:
+        saved = []
+        for stream, fd in streams:
+            stream.flush()
+            sink = stack.enter_context(tempfile.TemporaryFile())
+            saved.append((stream, fd, os.dup(fd), sink))
+            os.dup2(sink.fileno(), fd)
+        try:
+            yield captured
+        finally:
+            for stream, fd, old, sink in saved:
+                with contextlib.suppress(Exception):
+                    stream.flush()
+                os.dup2(old, fd)
+                os.close(old)
+                sink.seek(0)
+                captured.append(sink.read().decode("utf-8", "replace"))

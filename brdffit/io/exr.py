@@ -29,7 +29,7 @@ from .._files import atomic_file
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..measurement import Measurement
-from ._common import meta_from_json, meta_to_json
+from ._common import meta_from_json, meta_to_json, native_stderr_captured
 from .npz import check_usable
 
 FORMAT_TAG = "ubo81-table/1"
@@ -99,9 +99,10 @@ def read(path, *, name: str | None = None) -> Measurement:
     if magic != b"\x76\x2f\x31\x01":
         raise InputError(path, "not an OpenEXR file (wrong magic number)")
     try:
-        f = OpenEXR.File(str(path), separate_channels=True)
-        header = dict(f.header())
-        chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+        with native_stderr_captured():  # the library's own messages would add lines to the CLI's one
+            f = OpenEXR.File(str(path), separate_channels=True)
+            header = dict(f.header())
+            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
     except Exception as exc:  # noqa: BLE001 - the OpenEXR library's message, on one line
         raise InputError(path, f"unreadable OpenEXR (truncated or corrupt): {' '.join(str(exc).split())[:200]}") from exc
     if {"R", "G", "B"} <= set(chans):

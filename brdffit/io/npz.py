@@ -51,6 +51,10 @@ def read(path, *, name: str | None = None) -> Measurement:
             meta = meta_from_json(str(arrays["metadata"][()]))
         except ValueError as exc:
             raise InputError(path, f"unreadable metadata: {exc}") from exc
+    for key in (*REQUIRED, "weights"):
+        if key in arrays and arrays[key].dtype.kind not in "biuf":
+            kind = "complex" if arrays[key].dtype.kind == "c" else str(arrays[key].dtype)
+            raise InputError(path, f"array {key!r} holds {kind} values; a measurement holds real numbers")
     wi, wo, values = (np.asarray(arrays[k], dtype=np.float64) for k in REQUIRED)
     if values.ndim == 1:
         values = values[:, None]
@@ -62,6 +66,7 @@ def read(path, *, name: str | None = None) -> Measurement:
         raise InputError(path, f"weights {weights.shape} do not match {n} samples")
     if n == 0:
         raise InputError(path, "no samples")
+    wi, wo = unit_directions(path, "wi", wi), unit_directions(path, "wo", wo)
     check_usable(path, values, weights)
     extra = dict(meta.pop("extra", {}))
     extra.setdefault("format", "npz")
@@ -79,3 +84,21 @@ def check_usable(path, values: np.ndarray, weights: np.ndarray) -> None:
     ok = np.all(np.isfinite(values), axis=1) & (weights > 0)
     if not ok.any():
         raise InputError(path, "no usable sample: every value is NaN/inf or has weight 0")
+
+
+#: how far from 1 a direction's length may be and still count as a unit vector stored in float32
+#: or rounded text; it is then normalised. Anything else is refused: a length of 0.5 or 57 means
+#: another convention (degrees, unnormalised half vectors...), and guessing would fit nonsense.
+UNIT_TOLERANCE = 1e-3
+
+
+def unit_directions(path, name: str, d: np.ndarray) -> np.ndarray:
+    """``d`` (N, 3) normalised, when every row is a unit vector up to :data:`UNIT_TOLERANCE`."""
+    with np.errstate(all="ignore"):
+        length = np.linalg.norm(d, axis=1)
+    bad = ~(np.abs(length - 1.0) <= UNIT_TOLERANCE)  # NaN lengths are bad too
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(path, f"{int(bad.sum())} of {len(d)} directions in {name!r} are not unit vectors "
+                               f"(e.g. sample {k}: length {length[k]:.6g})")
+    return d / length[:, None]

@@ -47,7 +47,7 @@ def isotropic_coords(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
 
 def interpolate_scattered(m: Measurement, *, reciprocal: bool = True) -> Measurement:
     from scipy.interpolate import LinearNDInterpolator
-    from scipy.spatial import cKDTree
+    from scipy.spatial import QhullError, cKDTree
 
     valid = m.valid_mask()
     if valid.sum() < 5:
@@ -68,7 +68,14 @@ def interpolate_scattered(m: Measurement, *, reciprocal: bool = True) -> Measure
     q_all = isotropic_coords(wi, wo)
     q, q_inverse = np.unique(np.round(q_all, 12), axis=0, return_inverse=True)
     q_inverse = q_inverse.reshape(-1)
-    values = LinearNDInterpolator(uniq, y_mean)(q)[q_inverse]
+    try:
+        if len(uniq) < 4:
+            raise ValueError("fewer than 4 distinct points")
+        values = LinearNDInterpolator(uniq, y_mean)(q)[q_inverse]
+    except (ValueError, QhullError) as exc:  # all samples on one direction pair, one plane...
+        raise InputError(m.source or m.name, f"the {int(valid.sum())} valid samples do not span the directions "
+                         "(flat or coincident in theta_light, theta_view, dphi): cannot interpolate them onto "
+                         f"the UBO-81 grid ({' '.join(str(exc).split())[:80]})") from None
     dist, nearest = (a[q_inverse] for a in cKDTree(uniq).query(q))
     outside = ~np.all(np.isfinite(values), axis=1)
     values[outside] = y_mean[nearest[outside]]
