@@ -47,3 +47,11 @@ def shared_data() -> Path:
     if d is None:
         pytest.skip(NO_DATA)
     return d
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The malformed-input corpus tally (tests/test_malformed_corpus.py), shown even with -q."""
+    tally = getattr(config, "brdffit_corpus_tally", None)
+    if tally:
+        cases, passed, runs = tally
+        terminalreporter.write_line(f"malformed-input corpus: {passed}/{cases} cases passed ({runs} CLI runs)")

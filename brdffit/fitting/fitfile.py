@@ -97,7 +97,7 @@ def check_fit_document(d: dict[str, Any], path=None):
         model = model.with_channels(int(channels))
 
     for key, types in _SCALARS.items():
-        if key in d and not isinstance(d[key], types):
+        if key in d and (not isinstance(d[key], types) or (isinstance(d[key], bool) and bool not in types)):
             raise InputError(path, f"field {key!r} has the wrong type ({type(d[key]).__name__})")
     for key in _COUNTS:
         if key in d and not (isinstance(d[key], int) and not isinstance(d[key], bool) and d[key] >= 0):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -80,22 +81,22 @@ def native_stderr_captured():
     library prints its own messages for a damaged file, some on stdout): the CLI's one line must
     be the only one. Yields a list that holds the captured text afterwards."""
     captured: list[str] = []
-    streams = []
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            streams.append((stream, stream.fileno()))
-        except (AttributeError, OSError, ValueError):  # replaced by an object without a descriptor
-            pass
     with contextlib.ExitStack() as stack:
         saved = []
-        for stream, fd in streams:
-            stream.flush()
+        for stream, fd in ((sys.stdout, 1), (sys.stderr, 2)):  # the descriptors C code writes to
+            with contextlib.suppress(Exception):
+                stream.flush()
             sink = stack.enter_context(tempfile.TemporaryFile())
             saved.append((stream, fd, os.dup(fd), sink))
             os.dup2(sink.fileno(), fd)
+        # some messages go through Python's sys.stdout/sys.stderr objects instead of the descriptors
+        python_level = io.StringIO()
+        stack.enter_context(contextlib.redirect_stdout(python_level))
+        stack.enter_context(contextlib.redirect_stderr(python_level))
         try:
             yield captured
         finally:
+            captured.append(python_level.getvalue())
             for stream, fd, old, sink in saved:
                 with contextlib.suppress(Exception):
                     stream.flush()

@@ -19,6 +19,7 @@ Any other 81 x 81 RGB (or Y) EXR is read as a UBO-81 table on the nominal grid.
 from __future__ import annotations
 
 import base64
+import gc
 import json
 import zlib
 from pathlib import Path
@@ -98,13 +99,20 @@ def read(path, *, name: str | None = None) -> Measurement:
         magic = fh.read(4)
     if magic != b"\x76\x2f\x31\x01":
         raise InputError(path, "not an OpenEXR file (wrong magic number)")
-    try:
-        with native_stderr_captured():  # the library's own messages would add lines to the CLI's one
+    problem = None
+    # The library prints its own messages (some when its objects are freed): they would add
+    # lines to the CLI's one, so they are captured, and the objects freed inside the capture.
+    with native_stderr_captured():
+        try:
             f = OpenEXR.File(str(path), separate_channels=True)
             header = dict(f.header())
-            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-    except Exception as exc:  # noqa: BLE001 - the OpenEXR library's message, on one line
-        raise InputError(path, f"unreadable OpenEXR (truncated or corrupt): {' '.join(str(exc).split())[:200]}") from exc
+            chans = {k: np.array(v.pixels) for k, v in f.channels().items()}
+            del f
+        except Exception as exc:  # noqa: BLE001 - the OpenEXR library's message, on one line
+            problem = " ".join(str(exc).split())[:200]
+        gc.collect()
+    if problem is not None:
+        raise InputError(path, f"unreadable OpenEXR (truncated or corrupt): {problem}")
     if {"R", "G", "B"} <= set(chans):
         names = ("R", "G", "B")
     elif "Y" in chans:

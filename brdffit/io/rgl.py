@@ -110,6 +110,11 @@ def check_tensor_file(path: str | Path) -> dict[str, tuple[int, tuple[int, ...]]
         if offset < header_end or offset + nbytes > size:
             raise InputError(path, f"truncated or garbled: field {name!r} declares bytes {offset}..{offset + nbytes}, "
                                    f"the file has {size} (header ends at {header_end})")
+    spans = sorted((offset, offset + np.dtype(_DTYPES[dtype]).itemsize * _product(shape), name)
+                   for name, (dtype, shape, offset) in table.items())
+    for (_, end, name), (start, _, following) in zip(spans, spans[1:]):
+        if start < end:
+            raise InputError(path, f"garbled field table: fields {name!r} and {following!r} overlap")
     missing = [f for f in REQUIRED if f not in table]
     if missing:
         raise InputError(path, f"tensor_file lacks the field(s) {', '.join(missing)} of an RGL RGB material")
