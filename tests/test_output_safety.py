@@ -1,0 +1,227 @@
+"""No lost results (SPEC 10): concurrent writers, kills at every point of a --force replacement,
+Ctrl-C, and usage problems with the output found before the work."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from brdffit._files import atomic_dir, reserve
+from brdffit.cli import main
+from brdffit.errors import UsageError
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLE = REPO / "data" / "sample_ubo81.exr"
+ENV = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONPATH": str(REPO)}
+
+
+def brdffit_cmd() -> list[str]:
+    exe = Path(sys.executable).with_name("brdffit")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "brdffit"]
+
+
+def hidden(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def test_three_concurrent_fits_one_wins_others_exit_2(tmp_path):
+    """The issue's reproduction: three fits into one folder at once. One exits 0 and its result is
+    the one on disk; the two others exit 2 with one line; nothing else remains beside it."""
+    out = tmp_path / "C"
+    procs = {loss: subprocess.Popen([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert", "--loss", loss,
+                                     "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+             for loss in ("log", "l2", "cbrt")}
+    results = {loss: (p.wait(timeout=600), p.stderr.read()) for loss, p in procs.items()}
+    winners = [loss for loss, (code, _) in results.items() if code == 0]
+    assert len(winners) == 1, results
+    for loss, (code, err) in results.items():
+        if loss != winners[0]:
+            assert code == 2, (loss, code, err)
+            assert err.count("\n") == 1 and str(out) in err and "Traceback" not in err, err
+    assert json.loads((out / "fit.json").read_text())["loss"] == winners[0]
+    assert hidden(tmp_path) == []
+
+
+def test_lock_refuses_a_second_writer_while_the_first_works(tmp_path):
+    """Deterministic version of the race: while this process holds the output, a real run exits 2
+    ("another brdffit run"), even with --force, and writes nothing."""
+    out, table = tmp_path / "held", tmp_path / "held.npz"
+    with reserve(out, force=False, folder=True), reserve(table, force=False, folder=False):
+        r = subprocess.run([*brdffit_cmd(), "convert", str(SAMPLE), str(table), "--force"], capture_output=True,
+                           text=True, env=ENV, timeout=300)
+        r2 = subprocess.run([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert", "-o", str(out), "--force"],
+                            capture_output=True, text=True, env=ENV, timeout=300)
+    for run in (r, r2):
+        assert run.returncode == 2, run.stderr
+        assert run.stderr.count("\n") == 1 and "another brdffit run" in run.stderr, run.stderr
+    assert not out.exists() and not table.exists() and hidden(tmp_path) == []
+
+
+# -- kills at every line of a --force replacement -----------------------------------------------------
+KILL_CHILD = r"""
+import os, signal, sys, types
+from pathlib import Path
+
+# brdffit._files without the package's __init__ (which imports JAX): a child starts in ~50 ms
+package = types.ModuleType("brdffit")
+package.__path__ = [os.path.join(os.environ["PYTHONPATH"], "brdffit")]
+sys.modules["brdffit"] = package
+import brdffit._files as files
+
+target, kill_at, label = Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+source = files.__file__
+count = 0
+
+def tracer(frame, event, arg):
+    global count
+    if frame.f_code.co_filename != source:
+        return tracer
+    if event == "line":
+        count += 1
+        if count == kill_at:
+            os.kill(os.getpid(), signal.SIGKILL)
+    return tracer
+
+sys.settrace(tracer)
+with files.atomic_dir(target, force=True) as tmp:
+    for k in range(3):
+        (tmp / f"part{k}.txt").write_text(label * 1000)
+sys.settrace(None)
+print(count)
+"""
+
+
+def complete(folder: Path) -> str | None:
+    """The label a result folder holds when it is complete (three identical parts), else None."""
+    parts = [folder / f"part{k}.txt" for k in range(3)]
+    if not all(p.is_file() for p in parts):
+        return None
+    texts = {p.read_text() for p in parts}
+    return texts.pop()[0] if len(texts) == 1 else None
+
+
+def run_child(target: Path, kill_at: int, label: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", KILL_CHILD, str(target), str(kill_at), label], capture_output=True,
+                          text=True, env=ENV, timeout=60)
+
+
+def test_sigkill_at_every_line_of_a_forced_replacement(tmp_path):
+    """SIGKILL at each line the replacement executes in brdffit._files: the target always holds the
+    complete old ("a") or new ("b") result; the next run leaves no hidden entry behind."""
+    target = tmp_path / "result"
+    first = run_child(target, 0, "a")
+    assert first.returncode == 0 and complete(target) == "a", first.stderr
+    total = int(run_child(target, 0, "a").stdout)  # lines executed by a whole forced replacement
+    assert total > 20
+    killed = 0
+    for kill_at in range(1, total + 1):
+        r = run_child(target, kill_at, "b")
+        killed += r.returncode == -signal.SIGKILL
+        state = complete(target)
+        assert state in ("a", "b"), (kill_at, r.returncode, sorted(p.name for p in tmp_path.iterdir()))
+        # the next run (here, in this process) cleans what the killed one left
+        with atomic_dir(target, force=True) as tmp:
+            for k in range(3):
+                (tmp / f"part{k}.txt").write_text("a" * 1000)
+        assert complete(target) == "a"
+        assert hidden(tmp_path) == [], (kill_at, hidden(tmp_path))
+    assert killed >= total - 2  # (the last lines may come after the tracer's final count)
+
+
+def test_sigkill_during_a_real_fit_leaves_the_old_result(tmp_path):
+    """A real ``fit --force`` killed while it works: the old fit.json stays complete; the next run
+    replaces it and leaves no hidden entry."""
+    out = tmp_path / "F"
+    args = [*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert", "-o", str(out), "--force"]
+    assert subprocess.run(args, capture_output=True, env=ENV, timeout=600).returncode == 0
+    old = (out / "fit.json").read_text()
+    p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV)
+    lock = tmp_path / ".F.brdffit-lock"
+    deadline = time.monotonic() + 300
+    while not lock.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    p.send_signal(signal.SIGKILL)
+    p.wait(timeout=60)
+    assert (out / "fit.json").read_text() == old and (out / "fit.png").is_file()
+    assert subprocess.run(args, capture_output=True, env=ENV, timeout=600).returncode == 0
+    assert json.loads((out / "fit.json").read_text())["model"] == "lambert"
+    assert hidden(tmp_path) == []
+
+
+def test_ctrl_c_exits_130_with_nothing_written(tmp_path):
+    out = tmp_path / "I"
+    p = subprocess.Popen([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert+ggx", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    lock = tmp_path / ".I.brdffit-lock"
+    deadline = time.monotonic() + 300
+    while not lock.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert p.poll() is None, p.stderr.read()
+    p.send_signal(signal.SIGINT)
+    code = p.wait(timeout=120)
+    err = p.stderr.read()
+    assert code == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []  # no result, no temporary folder, no lock file
+
+
+def test_keyboard_interrupt_in_process_is_130(tmp_path, monkeypatch, capsys):
+    """In-process: an interrupt during the work unwinds the temporary result."""
+    import brdffit.cli.convert as convert_module
+    import brdffit.io as io
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(io, "resample", interrupted)
+    assert convert_module  # the command imports resample from brdffit.io at call time
+    code = main(["convert", str(SAMPLE), str(tmp_path / "t.npz")])
+    assert code == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- the output checked before the work ---------------------------------------------------------------
+@pytest.mark.parametrize("case", ["parent_is_file", "unwritable", "folder_for_file", "file_for_folder", "exists"])
+def test_output_problems_exit_2_before_any_work(tmp_path, capsys, monkeypatch, case):
+    import brdffit.fitting as fitting
+
+    def must_not_run(*a, **k):
+        raise AssertionError("the work ran before the output was checked")
+
+    monkeypatch.setattr(fitting, "fit", must_not_run)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir.exr").mkdir()
+    (tmp_path / "done").mkdir()
+    argv = {
+        "parent_is_file": ["fit", str(SAMPLE), "--model", "lambert", "-o", str(tmp_path / "afile" / "out")],
+        "unwritable": ["fit", str(SAMPLE), "--model", "lambert", "-o", "/proc/brdffit-no/out"],
+        "folder_for_file": ["convert", str(SAMPLE), str(tmp_path / "adir.exr"), "--force"],
+        "file_for_folder": ["fit", str(SAMPLE), "--model", "lambert", "-o", str(tmp_path / "afile"), "--force"],
+        "exists": ["fit", str(SAMPLE), "--model", "lambert", "-o", str(tmp_path / "done")],
+    }[case]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_reserve_is_reentrant_and_atomic_dir_without_force_refuses_existing(tmp_path):
+    out = tmp_path / "r"
+    with reserve(out, folder=True):
+        with atomic_dir(out) as tmp:  # nested: shares the lock
+            (tmp / "a").write_text("1")
+    assert (out / "a").read_text() == "1"
+    with pytest.raises(UsageError, match="already exists"):
+        with atomic_dir(out):
+            pass
+    assert hidden(tmp_path) == []
