@@ -103,11 +103,11 @@ def _show_warnings(caught, debug: bool) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map errors to SPEC 10 exit statuses."""
     argv, debug = _split_debug(list(sys.argv[1:] if argv is None else argv))
-    _load_commands()
     caught: list = []
     try:
         with warnings.catch_warnings(record=True) as caught, _interrupts_raise():
             warnings.simplefilter("always")
+            _load_commands()  # inside: a Ctrl-C during the imports is an interrupt like any other
             result = cli.main(args=(["--debug"] if debug else []) + argv, prog_name="brdffit", standalone_mode=False)
     except (Interrupted, KeyboardInterrupt, click.exceptions.Abort):
         click.echo("brdffit: interrupted", err=True)
