@@ -59,7 +59,8 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
         from ..fitting.result import FitResult
 
         # FIT.json is a fit file whatever its name: checked as one (not guessed as a measurement)
-        reference, fit = as_source(source), as_fit(FitResult.from_json(Path(fit_json)))
+        fit = as_fit(FitResult.from_json(Path(fit_json)))  # the small file first: a bad one costs nothing
+        reference = as_source(source)
 
         t_import = time.perf_counter() - t0
         stages = ("render reference", "render fit", "metrics", "panels")

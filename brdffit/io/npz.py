@@ -101,4 +101,5 @@ def unit_directions(path, name: str, d: np.ndarray) -> np.ndarray:
         k = int(np.argmax(bad))
         raise InputError(path, f"{int(bad.sum())} of {len(d)} directions in {name!r} are not unit vectors "
                                f"(e.g. sample {k}: length {length[k]:.6g})")
-    return d / length[:, None]
+    # rows already unit to rounding are kept bit for bit (exact round trips of brdffit's own files)
+    return np.where((np.abs(length - 1.0) > 1e-12)[:, None], d / length[:, None], d)
