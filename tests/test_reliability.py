@@ -237,3 +237,49 @@ def test_complex_values_refused(tmp_path, capsys):
     assert "complex" in err and "ComplexWarning" not in err
     with pytest.raises(ValueError, match="complex"):
         brdffit.Measurement(wi=wi, wo=wo, values=np.ones((6561, 3)) * 1j)
+
+
+def test_rgl_files_that_pass_verification_never_crash_mitsuba(tmp_path):
+    """Fuzz: finite but wild values (huge, tiny, zero, negative) written at random places of the data
+    of a valid file, some files truncated. Those the verifier accepts are loaded and rendered, all in one child
+    process: it must end normally, never by a signal (the plugin has no bounds checks of its own)."""
+    import subprocess
+
+    from brdffit.io.rgl import check_tensor_file
+
+    good = small_rgl()
+    first_data = struct.unpack_from("<Q", good, good.index(b"\x05\x00phi_i") + 2 + 5 + 3)[0]
+    rng = np.random.default_rng(9)
+    accepted = []
+    for k in range(60):
+        b = bytearray(good)
+        for _ in range(1 + k % 5):
+            at = int(rng.integers(first_data, len(good) - 4)) // 4 * 4
+            b[at:at + 4] = np.float32(rng.choice([3e38, 1e-38, 0.0, 7.0, -0.5, 1e10, -3e38])).tobytes()
+        if k % 6 == 5:  # and some truncated: the plugin maps the file and would read past its end
+            b = b[: int(rng.integers(100, len(b)))]
+        p = tmp_path / f"m{k}.bsdf"
+        p.write_bytes(bytes(b))
+        try:
+            check_tensor_file(p)
+            accepted.append(str(p))
+        except InputError:
+            pass
+    assert len(accepted) >= 10  # enough of them reach the plugin
+    child = (
+        "import sys, brdffit\n"
+        "from brdffit.errors import InputError\n"
+        "for p in sys.argv[1:]:\n"
+        "    try:\n"
+        "        brdffit.load(p)\n"
+        "        brdffit.render_sphere(p, [(0.4, 0.0)], size=8)\n"
+        "    except InputError:\n"
+        "        pass\n"
+        "print('done', len(sys.argv) - 1)\n"
+    )
+    import os
+
+    r = subprocess.run([sys.executable, "-c", child, *accepted], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])  # negative: killed by a signal
+    assert f"done {len(accepted)}" in r.stdout
