@@ -50,6 +50,8 @@ def check_target(path: str | os.PathLike, force: bool, folder: bool | None = Non
     """``path`` may be written: it does not exist (or ``force``), it is of the right kind
     (``folder`` True/False; None: either), and no part of its parent is a file."""
     path = Path(path)
+    if path.absolute().name in ("", ".", "..") or path.absolute() == Path.cwd():
+        raise UsageError(f"{path}: name a new output inside a folder, not the folder itself")
     for parent in path.absolute().parents:
         if parent.exists():
             if not parent.is_dir():
