@@ -189,7 +189,7 @@ def test_keyboard_interrupt_in_process_is_130(tmp_path, monkeypatch, capsys):
 
 
 # -- the output checked before the work ---------------------------------------------------------------
-@pytest.mark.parametrize("case", ["parent_is_file", "unwritable", "folder_for_file", "file_for_folder", "exists"])
+@pytest.mark.parametrize("case", ["parent_is_file", "unwritable", "folder_for_file", "file_for_folder", "exists", "cwd"])
 def test_output_problems_exit_2_before_any_work(tmp_path, capsys, monkeypatch, case):
     import brdffit.fitting as fitting
 
@@ -206,7 +206,9 @@ def test_output_problems_exit_2_before_any_work(tmp_path, capsys, monkeypatch, c
         "folder_for_file": ["convert", str(SAMPLE), str(tmp_path / "adir.exr"), "--force"],
         "file_for_folder": ["fit", str(SAMPLE), "--model", "lambert", "-o", str(tmp_path / "afile"), "--force"],
         "exists": ["fit", str(SAMPLE), "--model", "lambert", "-o", str(tmp_path / "done")],
+        "cwd": ["fit", str(SAMPLE), "--model", "lambert", "-o", ".", "--force"],  # never swap the folder we are in
     }[case]
+    monkeypatch.chdir(tmp_path)
     before = sorted(p.name for p in tmp_path.iterdir())
     code = main(argv)
     err = capsys.readouterr().err
