@@ -382,6 +382,7 @@ def work(tmp_path_factory):
     return tmp_path_factory.mktemp("corpus")
 
 
+@pytest.mark.slow
 def test_malformed_corpus(work, capfd, request):
     """At least 300 malformed inputs: each exits 2 with one line naming the file, nothing written."""
     cases = corpus(work)

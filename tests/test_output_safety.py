@@ -31,6 +31,7 @@ def hidden(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
 
 
+@pytest.mark.slow
 def test_three_concurrent_fits_one_wins_others_exit_2(tmp_path):
     """The issue's reproduction: three fits into one folder at once. One exits 0 and its result is
     the one on disk; the two others exit 2 with one line; nothing else remains beside it."""
@@ -135,6 +136,7 @@ def test_sigkill_at_every_line_of_a_forced_replacement(tmp_path):
     assert killed >= total - 2  # (the last lines may come after the tracer's final count)
 
 
+@pytest.mark.slow
 def test_sigkill_during_a_real_fit_leaves_the_old_result(tmp_path):
     """A real ``fit --force`` killed while it works: the old fit.json stays complete; the next run
     replaces it and leaves no hidden entry."""
