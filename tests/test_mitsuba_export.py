@@ -164,7 +164,7 @@ time.sleep(float(sys.argv[1]))  # the interpreter starts its exit while that com
 """
 
 
-@pytest.mark.parametrize("delay", [0.2, 0.4])
+@pytest.mark.parametrize("delay", [0.2, 0.4, 0.8])
 def test_exit_while_the_model_compiles_is_clean(delay):
     proc = subprocess.run([sys.executable, "-c", EXIT_SNIPPET, str(delay)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-500:]
