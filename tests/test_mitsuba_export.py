@@ -169,3 +169,29 @@ def test_exit_while_the_model_compiles_is_clean(delay):
     proc = subprocess.run([sys.executable, "-c", EXIT_SNIPPET, str(delay)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-500:]
     assert "terminate called" not in proc.stderr
+
+
+VARIANT_SNIPPET = """
+import sys
+import numpy as np
+import mitsuba as mi
+mi.set_variant("scalar_rgb")  # the user's choice, not brdffit's llvm_ad_rgb
+import brdffit  # registers the plugin for it
+scene = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 3},
+    "sensor": {"type": "orthographic", "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+               "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+    "ball": {"type": "sphere", "bsdf": brdffit.mitsuba_bsdf("lambert", {"kd": 0.5})},
+    "sky": {"type": "constant"}})
+with brdffit.evaluated_calls():
+    img = np.asarray(mi.render(scene, spp=16))
+centre = img[2:6, 2:6, :3].mean()
+print(mi.variant(), round(float(centre), 2))
+"""
+
+
+def test_plugin_keeps_the_users_variant():
+    """A Lambertian sphere of albedo 0.5 under a unit white sky: radiance 0.5 facing the camera."""
+    proc = subprocess.run([sys.executable, "-c", VARIANT_SNIPPET], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    variant, centre = proc.stdout.split()
+    assert variant == "scalar_rgb" and abs(float(centre) - 0.5) < 0.03

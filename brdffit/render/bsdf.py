@@ -55,9 +55,12 @@ def import_native() -> None:
 
     A first import of a nanobind extension while another thread runs nanobind code (JAX compiling
     in the background) once failed with "SystemError: <built-in function __import__> returned a
-    result with an exception set"; importing them up front removes the race.
+    result with an exception set"; importing them up front removes the race. Mitsuba keeps the
+    caller's variant when one is set (a user's own scene loading the ``brdffit`` plugin).
     """
-    mitsuba()
+    from .._mitsuba import user_mitsuba
+
+    user_mitsuba()
     import flip_evaluator  # noqa: F401
     import OpenEXR  # noqa: F401
 
