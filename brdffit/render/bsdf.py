@@ -160,9 +160,11 @@ def _callback_class(variant: str):
         weight is eval / pdf at the sampled direction.
         """
 
-        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback", mixture=None):
+        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback", mixture=None, uv_brdf=None):
             mi.BSDF.__init__(self, props)
             self.brdf = brdf
+            #: f_r(wi, wo, uv) for parameter maps (uv: (N, 2) surface coordinates), else None
+            self.uv_brdf = uv_brdf
             self.label = label
             self.mixture = mixture if mixture is not None else Mixture.cosine()
             self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
@@ -184,7 +186,14 @@ def _callback_class(variant: str):
                 light, view = np.broadcast_to(light, (n, 3)), np.broadcast_to(view, (n, 3))
             up = (light[:, 2] > 0) & (view[:, 2] > 0)
             value = np.zeros((light.shape[0], 3))
-            if up.any():
+            if up.any() and self.uv_brdf is not None:
+                if scalar:
+                    uv = np.array([[si.uv.x, si.uv.y]], np.float64)
+                else:
+                    uv = np.stack([np.asarray(si.uv.x, np.float64), np.asarray(si.uv.y, np.float64)], -1).reshape(-1, 2)
+                uv = np.broadcast_to(uv, (light.shape[0], 2))
+                value[up] = np.asarray(self.uv_brdf(light[up], view[up], uv[up]), np.float64) * light[up, 2:3]
+            elif up.any():
                 f = np.asarray(self.brdf(light[up], view[up]), np.float64)
                 # No clean-up of NaN or negative values: the image shows the BRDF as it is (and the
                 # tests that every model renders finite, non-negative images mean something).
@@ -225,13 +234,14 @@ def _callback_class(variant: str):
     return CallbackBSDF
 
 
-def callback_bsdf(brdf: BrdfFn, label: str = "callback", mixture=None):
+def callback_bsdf(brdf: BrdfFn | None, label: str = "callback", mixture=None, uv_brdf=None):
     """A Mitsuba BSDF object evaluating ``brdf`` (a NumPy f_r) through :class:`CallbackBSDF`,
-    sampled by ``mixture`` (a :class:`~brdffit.render.sampling.Mixture`; cosine when None)."""
+    sampled by ``mixture`` (a :class:`~brdffit.render.sampling.Mixture`; cosine when None);
+    ``uv_brdf(wi, wo, uv)`` instead of ``brdf`` for parameter maps."""
     from .._mitsuba import user_mitsuba
 
     mi = user_mitsuba()
-    return _callback_class(mi.variant())(mi.Properties(), brdf=brdf, label=label, mixture=mixture)
+    return _callback_class(mi.variant())(mi.Properties(), brdf=brdf, label=label, mixture=mixture, uv_brdf=uv_brdf)
 
 
 def measured_bsdf(path: str | Path):

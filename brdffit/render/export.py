@@ -109,10 +109,71 @@ def register_if_loaded() -> None:
         pass
 
 
-def mitsuba_bsdf(model_or_fit, params=None) -> dict:
-    """A BSDF dict for ``mi.load_dict`` rendering ``model_or_fit`` (a FitResult, or a model name /
-    Model with ``params``) in any Mitsuba 3 scene: the ``brdffit`` plugin (registered here for the
-    current variant). Render scenes that hold it inside :func:`brdffit.evaluated_calls`."""
+def _is_map(params) -> bool:
+    return params is not None and any(np.ndim(v) >= 2 for v in params.values())
+
+
+def map_bsdf(model, params):
+    """The callback BSDF of parameter *maps*: each parameter a value, or an (H, W) / (H, W, size)
+    array over the surface's uv. Texel (row i, column j) covers u in [j/W, (j+1)/W) and v in
+    [i/H, (i+1)/H): the layout of Mitsuba's own ``bitmap`` texture (nearest lookup, no filtering).
+    The formula is the JAX ``model.eval`` per texel; sampling follows the mixture of the map's mean
+    parameters (a valid density everywhere; best where texels are alike)."""
+    import jax
+    import jax.numpy as jnp
+
+    from .. import models
+    from .bsdf import CHUNK, callback_bsdf, import_native
+    from .sampling import Mixture
+
+    model = models.get(model)
+    shapes = {np.shape(v)[:2] for v in params.values() if np.ndim(v) >= 2}
+    if len(shapes) != 1:
+        raise ValueError(f"parameter maps must share one (H, W) shape, got {sorted(shapes)}")
+    (height, width), = shapes
+    flat = {}
+    for p in model.params:
+        if p.name not in params:
+            raise ValueError(f"model {model.name!r}: missing parameter {p.name!r}")
+        v = np.asarray(params[p.name], np.float64)
+        size = model.size(p)
+        v = v.reshape(height, width, -1) if v.ndim >= 2 else v.reshape(1, 1, -1)
+        flat[p.name] = np.broadcast_to(v, (height, width, size)).reshape(height * width, size)
+    mean = {k: v.mean(axis=0) for k, v in flat.items()}
+    import_native()
+    per_lane = jax.jit(jax.vmap(lambda q, a, b: model.eval(q, a[None], b[None])[0]))
+
+    def uv_brdf(wi, wo, uv):
+        col = np.clip(np.floor(uv[:, 0] * width), 0, width - 1).astype(np.int64)
+        row = np.clip(np.floor(uv[:, 1] * height), 0, height - 1).astype(np.int64)
+        texel = row * width + col
+        n = len(texel)
+        out = np.empty((n, model.channels))
+        length = 16 if n <= 16 else CHUNK  # two compiled shapes, as for a single parameter set
+        for start in range(0, n, length):
+            stop = min(n, start + length)
+            idx = np.zeros(length, np.int64)
+            idx[: stop - start] = texel[start:stop]
+            a = np.tile([0.0, 0.0, 1.0], (length, 1))
+            b = a.copy()
+            a[: stop - start], b[: stop - start] = wi[start:stop], wo[start:stop]
+            q = {k: jnp.asarray(v[idx]) for k, v in flat.items()}
+            out[start:stop] = np.asarray(per_lane(q, jnp.asarray(a), jnp.asarray(b)))[: stop - start]
+        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
+
+    return callback_bsdf(None, f"brdffit:{model.name} (maps {height}x{width})", Mixture.for_model(model, model.check_params(mean)),
+                         uv_brdf=uv_brdf)
+
+
+def mitsuba_bsdf(model_or_fit, params=None):
+    """A BSDF for ``mi.load_dict`` rendering ``model_or_fit`` (a FitResult, or a model name /
+    Model with ``params``) in any Mitsuba 3 scene: the ``brdffit`` plugin's dict (registered here
+    for the current variant). With parameter *maps* (any value an (H, W) or (H, W, size) array,
+    e.g. a per-texel BTF fit) it is a BSDF object instead, looked up by uv (see :func:`map_bsdf`);
+    it goes into a scene dict the same way. Render scenes that hold either inside
+    :func:`brdffit.evaluated_calls`."""
+    if not hasattr(model_or_fit, "params") and _is_map(params):
+        return map_bsdf(model_or_fit, params)
     model, values = _model_and_params(model_or_fit, params)
     register_mitsuba()
     out: dict = {"type": PLUGIN, "model": model.name}
