@@ -35,6 +35,9 @@ _LAZY = {
     "render_sphere": "brdffit.render",
     "validate": "brdffit.render",
     "Validation": "brdffit.render",
+    "mitsuba_bsdf": "brdffit.render.export",
+    "register_mitsuba": "brdffit.render.export",
+    "evaluated_calls": "brdffit._mitsuba",
 }
 
 
@@ -44,6 +47,20 @@ def __getattr__(name: str):
         globals()[name] = value
         return value
     raise AttributeError(f"module 'brdffit' has no attribute {name!r}")
+
+
+def _register_mitsuba_plugin() -> None:
+    # A user who set a Mitsuba variant before `import brdffit` can load scenes with
+    # <bsdf type="brdffit"> right away (SPEC 8); otherwise brdffit.register_mitsuba() does it.
+    import sys
+
+    if "mitsuba" in sys.modules:
+        from .render.export import register_if_loaded
+
+        register_if_loaded()
+
+
+_register_mitsuba_plugin()
 
 
 def __dir__():

@@ -9,9 +9,11 @@ Modules that render import Mitsuba through :func:`mitsuba` and nowhere else.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import re
+import sys
 import warnings
 
 MIN_LLVM = 16
@@ -87,3 +89,70 @@ def mitsuba(preferred: str = "llvm_ad_rgb"):
     if mi.variant() != variant:
         mi.set_variant(variant)
     return mi
+
+
+def user_mitsuba():
+    """Mitsuba with the caller's variant when one is already set (a user's own scene), else brdffit's.
+
+    ``mitsuba()`` switches to brdffit's variant; code that hands objects to a *user's* scene
+    (``FitResult.to_mitsuba``, the ``brdffit`` plugin) must not change the variant under them.
+    """
+    import sys
+
+    mi = sys.modules.get("mitsuba")
+    if mi is not None:
+        try:
+            if mi.variant() is not None:
+                return mi
+        except Exception:  # noqa: BLE001 - an old Mitsuba without variant(): fall through
+            pass
+    return mitsuba()
+
+
+def symbolic_scope() -> bool:
+    """True while Dr.Jit records a symbolic call or loop (no array may be read back then)."""
+    import drjit as dr
+
+    return bool(dr.flag(dr.JitFlag.SymbolicScope))
+
+
+@contextlib.contextmanager
+def evaluated_calls():
+    """Render scenes that hold a brdffit BSDF: Dr.Jit virtual calls and loops run *evaluated*.
+
+    brdffit's Mitsuba BSDF is a Python object whose ``eval`` hands Mitsuba's arrays to JAX and back,
+    which Dr.Jit allows only when it evaluates calls (the default, symbolic mode records them into
+    one kernel and forbids reading arrays back). This is the one place brdffit changes Dr.Jit
+    flags; every brdffit render runs inside it, and so should a user's own ``mi.render`` of a scene
+    holding a brdffit BSDF::
+
+        with brdffit.evaluated_calls():
+            image = mi.render(scene, spp=64)
+
+    The flags are restored on exit (also after an error), so other scenes render as before, in
+    symbolic mode. Scenes *without* a brdffit BSDF need nothing: a brdffit BSDF that merely exists
+    while another scene is rendered symbolically is traced by Dr.Jit (every registered BSDF is) and
+    answers with zeros that no ray of that scene can reach. Nesting is allowed.
+    """
+    mi = sys.modules.get("mitsuba")
+    if mi is None or (mi.variant() or "").startswith("scalar"):
+        yield  # no Dr.Jit JIT in use (or the scalar variant: nothing is recorded)
+        return
+    import drjit as dr
+
+    flags = (dr.JitFlag.SymbolicCalls, dr.JitFlag.SymbolicLoops)
+    old = [dr.flag(f) for f in flags]
+    for f in flags:
+        dr.set_flag(f, False)
+    try:
+        yield
+    finally:
+        for f, v in zip(flags, old):
+            dr.set_flag(f, v)
+
+
+def render(scene, **kwargs):
+    """``mi.render(scene, **kwargs)`` inside :func:`evaluated_calls` (works for any scene)."""
+    mi = user_mitsuba()
+    with evaluated_calls():
+        return mi.render(scene, **kwargs)

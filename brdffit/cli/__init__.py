@@ -12,7 +12,6 @@ Each sub-command lives in its own module of this package and registers itself on
 from __future__ import annotations
 
 import contextlib
-import os
 import signal
 import sys
 import threading
@@ -134,17 +133,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """The ``brdffit`` executable: ``main()``, then a fast exit.
+    """The ``brdffit`` executable: ``main()`` and a normal interpreter exit.
 
-    Everything a command writes is closed (and atomically renamed) before ``main`` returns, so the
-    interpreter's teardown of JAX and Dr.Jit (about 0.4 s, measured with ``brdffit validate``)
-    does nothing for the user; the executable skips it after flushing its output streams. Code
-    that calls :func:`main` in-process keeps the normal interpreter exit.
+    (It used to skip the teardown with ``os._exit`` to save ~0.4 s; that also hid the abort at exit
+    of issue 13 -- a daemon compile thread -- which is fixed in the library now, and skipped
+    atexit handlers such as coverage's.)
     """
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+    sys.exit(main())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -64,6 +64,14 @@ class FitResult:
         p = {k: jnp.asarray(v) for k, v in self.params.items()}
         return np.asarray(self.model.eval(p, jnp.asarray(wi, dtype=jnp.float64), jnp.asarray(wo, dtype=jnp.float64)))
 
+    def to_mitsuba(self) -> dict:
+        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene, with the same
+        JAX formula (SPEC 8; see :mod:`brdffit.render.export`). Render such scenes inside
+        ``with brdffit.evaluated_calls():``."""
+        from ..render.export import mitsuba_bsdf
+
+        return mitsuba_bsdf(self)
+
     # -- JSON -------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -24,7 +24,6 @@ that converts between the two.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import threading
 import time
@@ -34,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Float
 
-from .._mitsuba import mitsuba
+from .._mitsuba import evaluated_calls, mitsuba
 
 #: f_r(wi = towards light, wo = towards viewer) in the local frame -> (N, 3) in 1/sr, NumPy.
 BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -56,59 +55,84 @@ def import_native() -> None:
 
     A first import of a nanobind extension while another thread runs nanobind code (JAX compiling
     in the background) once failed with "SystemError: <built-in function __import__> returned a
-    result with an exception set"; importing them up front removes the race.
+    result with an exception set"; importing them up front removes the race. Mitsuba keeps the
+    caller's variant when one is set (a user's own scene loading the ``brdffit`` plugin).
     """
-    mitsuba()
+    from .._mitsuba import user_mitsuba
+
+    user_mitsuba()
     import flip_evaluator  # noqa: F401
     import OpenEXR  # noqa: F401
+
+
+@functools.cache
+def _jitted_eval(model):
+    """``model.eval`` jitted with the parameters as an argument: one compilation per model serves
+    every parameter set (the fit, and the isolated lobes the sampler weighs)."""
+    import jax
+
+    return jax.jit(model.eval)
+
+
+#: (model, length) pairs compiled or being compiled in the background, and their threads.
+_WARM: dict = {}
 
 
 def model_brdf(model, params) -> BrdfFn:
     """NumPy f_r of an analytic model: the JAX ``model.eval`` (jitted), channels broadcast to 3.
 
     Inputs are evaluated in padded chunks of :data:`CHUNK` directions, so JAX compiles the model
-    once (about 0.15 s) and not once per array length.
+    once per process (about 0.15 s) and not once per array length or parameter set.
     """
-    import jax
-    import jax.numpy as jnp
-
     params = model.check_params(params)
     import_native()  # before the compile thread below starts
-
-    @jax.jit
-    def f(wi, wo):
-        return model.eval(params, wi, wo)
+    f = _jitted_eval(model)
 
     # Compile for the CHUNK shape in a background thread now: XLA compiles without the GIL, so this
-    # overlaps with whatever comes next (in a validation: rendering the reference).
+    # overlaps with whatever comes next (in a validation: rendering the reference). Not a daemon
+    # thread: the interpreter joins it before tearing down. A daemon thread still compiling at exit
+    # comes back to a finalising interpreter, which ends it by unwinding through XLA's C++ frames:
+    # "terminate called after throwing an instance of ''" and exit status -6 (issue 13).
     pole = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
+    warm = _WARM.get(model)
+    if warm is None:
 
-    def compile_now():
-        t = time.perf_counter()
-        f(pole, pole).block_until_ready()
-        COMPILE_SECONDS.append(time.perf_counter() - t)
+        def compile_now():
+            t = time.perf_counter()
+            f(params, pole, pole).block_until_ready()
+            COMPILE_SECONDS.append(time.perf_counter() - t)
 
-    warm = threading.Thread(target=compile_now, name="brdffit-jit", daemon=True)
-    warm.start()
+        warm = _WARM[model] = threading.Thread(target=compile_now, name="brdffit-jit", daemon=False)
+        warm.start()
 
     def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        if warm.is_alive():
-            warm.join()  # one compilation, not two racing ones
-        wi = np.asarray(wi, np.float64).reshape(-1, 3)
-        wo = np.asarray(wo, np.float64).reshape(-1, 3)
-        n = wi.shape[0]
-        out = np.empty((n, model.channels))
-        length = SMALL if n <= SMALL else CHUNK
-        for start in range(0, n, length):
-            stop = min(n, start + length)
-            a = np.tile(np.array([[0.0, 0.0, 1.0]]), (length, 1))
-            b = a.copy()
-            a[: stop - start] = wi[start:stop]
-            b[: stop - start] = wo[start:stop]
-            out[start:stop] = np.asarray(f(jnp.asarray(a), jnp.asarray(b)))[: stop - start]
-        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
+        out = eval_model(model, params, wi, wo)
+        return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out[:, :3]
 
     return brdf
+
+
+def eval_model(model, params, wi, wo) -> np.ndarray:
+    """(N, channels) f_r of ``model`` at ``params`` (checked), through the compiled CHUNK shape."""
+    import jax.numpy as jnp
+
+    warm = _WARM.get(model)
+    if warm is not None and warm.is_alive():
+        warm.join()  # one compilation, not two racing ones
+    f = _jitted_eval(model)
+    wi = np.asarray(wi, np.float64).reshape(-1, 3)
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    n = wi.shape[0]
+    out = np.empty((n, model.channels))
+    length = SMALL if n <= SMALL else CHUNK
+    for start in range(0, n, length):
+        stop = min(n, start + length)
+        a = np.tile(np.array([[0.0, 0.0, 1.0]]), (length, 1))
+        b = a.copy()
+        a[: stop - start] = wi[start:stop]
+        b[: stop - start] = wo[start:stop]
+        out[start:stop] = np.asarray(f(params, jnp.asarray(a), jnp.asarray(b)))[: stop - start]
+    return out
 
 
 def _vec_to_numpy(v) -> np.ndarray:
@@ -116,37 +140,60 @@ def _vec_to_numpy(v) -> np.ndarray:
 
 
 @functools.cache
-def _callback_class():
-    """The CallbackBSDF class, defined on first use (it subclasses a Mitsuba type)."""
-    mi = mitsuba()
+def _callback_class(variant: str):
+    """The CallbackBSDF class of one Mitsuba variant, defined on first use (it subclasses mi.BSDF)."""
+    from .._mitsuba import symbolic_scope, user_mitsuba
+    from .sampling import Mixture
+
+    mi = user_mitsuba()
+    if mi.variant() != variant:
+        raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
     import drjit as dr
 
-    scalar = mi.variant().startswith("scalar")
+    scalar = variant.startswith("scalar")
 
     class CallbackBSDF(mi.BSDF):
         """A reflective BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.
 
-        ``sample`` draws cosine-weighted directions (the ``direct`` integrator of a validation
-        samples emitters only and never calls it; it is there so the BSDF is complete).
+        ``sample`` and ``pdf`` follow a :class:`~brdffit.render.sampling.Mixture` of the model's
+        lobes (cosine-weighted for a table); ``eval``, ``pdf`` and ``sample`` agree: a sample's
+        weight is eval / pdf at the sampled direction.
         """
 
-        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback"):
+        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback", mixture=None, uv_brdf=None):
             mi.BSDF.__init__(self, props)
             self.brdf = brdf
+            #: f_r(wi, wo, uv) for parameter maps (uv: (N, 2) surface coordinates), else None
+            self.uv_brdf = uv_brdf
             self.label = label
+            self.mixture = mixture if mixture is not None else Mixture.cosine()
             self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
             self.m_components = [self.m_flags]
 
         def _eval_cos(self, si, wo, active):
+            if not scalar and symbolic_scope():
+                # Dr.Jit is recording a symbolic call over every registered BSDF, this one included,
+                # for a render that runs symbolically: a scene that holds this BSDF renders inside
+                # evaluated_calls() and never gets here, so no ray of this one reaches these lanes.
+                return dr.zeros(mi.Color3f, max(dr.width(wo), dr.width(si.wi)))
             # Mitsuba: si.wi = view, wo = light. SPEC: f_r(light, view) * cos(theta_light).
             if scalar:
                 light = np.array([[wo.x, wo.y, wo.z]], np.float64)
                 view = np.array([[si.wi.x, si.wi.y, si.wi.z]], np.float64)
             else:
                 light, view = _vec_to_numpy(wo), _vec_to_numpy(si.wi)
+                n = max(len(light), len(view))  # one of them may be a broadcast single direction
+                light, view = np.broadcast_to(light, (n, 3)), np.broadcast_to(view, (n, 3))
             up = (light[:, 2] > 0) & (view[:, 2] > 0)
             value = np.zeros((light.shape[0], 3))
-            if up.any():
+            if up.any() and self.uv_brdf is not None:
+                if scalar:
+                    uv = np.array([[si.uv.x, si.uv.y]], np.float64)
+                else:
+                    uv = np.stack([np.asarray(si.uv.x, np.float64), np.asarray(si.uv.y, np.float64)], -1).reshape(-1, 2)
+                uv = np.broadcast_to(uv, (light.shape[0], 2))
+                value[up] = np.asarray(self.uv_brdf(light[up], view[up], uv[up]), np.float64) * light[up, 2:3]
+            elif up.any():
                 f = np.asarray(self.brdf(light[up], view[up]), np.float64)
                 # No clean-up of NaN or negative values: the image shows the BRDF as it is (and the
                 # tests that every model renders finite, non-negative images mean something).
@@ -161,37 +208,40 @@ def _callback_class():
             return self._eval_cos(si, wo, active)
 
         def pdf(self, ctx, si, wo, active=True):
-            pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
-            return dr.select(active & (mi.Frame3f.cos_theta(si.wi) > 0), pdf, 0.0)
+            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
 
         def eval_pdf(self, ctx, si, wo, active=True):
             return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
-            wo = mi.warp.square_to_cosine_hemisphere(sample2)
-            bs = mi.BSDFSample3f()
+            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
+            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
             bs.wo = wo
-            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
+            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
             bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
             bs.sampled_component = mi.UInt32(0)
-            value = self._eval_cos(si, wo, active)
-            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
-            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-12), 0.0)
+            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+            value = self._eval_cos(si, wo, ok)
+            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
 
         def traverse(self, callback):
             pass
 
         def to_string(self):
-            return f"CallbackBSDF[{self.label}]"
+            return f"CallbackBSDF[{self.label}; {self.mixture!r}]"
 
     return CallbackBSDF
 
 
-def callback_bsdf(brdf: BrdfFn, label: str = "callback"):
-    """A Mitsuba BSDF object evaluating ``brdf`` (a NumPy f_r) through :class:`CallbackBSDF`."""
-    mi = mitsuba()
-    return _callback_class()(mi.Properties(), brdf=brdf, label=label)
+def callback_bsdf(brdf: BrdfFn | None, label: str = "callback", mixture=None, uv_brdf=None):
+    """A Mitsuba BSDF object evaluating ``brdf`` (a NumPy f_r) through :class:`CallbackBSDF`,
+    sampled by ``mixture`` (a :class:`~brdffit.render.sampling.Mixture`; cosine when None);
+    ``uv_brdf(wi, wo, uv)`` instead of ``brdf`` for parameter maps."""
+    from .._mitsuba import user_mitsuba
+
+    mi = user_mitsuba()
+    return _callback_class(mi.variant())(mi.Properties(), brdf=brdf, label=label, mixture=mixture, uv_brdf=uv_brdf)
 
 
 def measured_bsdf(path: str | Path):
@@ -204,26 +254,6 @@ def measured_bsdf(path: str | Path):
     if not path.is_file():
         raise InputError(str(path), "no such file")
     return load_measured(path)
-
-
-@contextlib.contextmanager
-def evaluated_calls():
-    """Dr.Jit virtual calls and loops run evaluated (not recorded) while rendering a callback BSDF."""
-    mi = mitsuba()
-    if mi.variant().startswith("scalar"):
-        yield
-        return
-    import drjit as dr
-
-    flags = (dr.JitFlag.SymbolicCalls, dr.JitFlag.SymbolicLoops)
-    old = [dr.flag(f) for f in flags]
-    for f in flags:
-        dr.set_flag(f, False)
-    try:
-        yield
-    finally:
-        for f, v in zip(flags, old):
-            dr.set_flag(f, v)
 
 
 def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
@@ -265,7 +295,14 @@ class Source:
     """
 
     def __init__(
-        self, kind: str, label: str, brdf: BrdfFn | None = None, path: Path | None = None, valid: np.ndarray | None = None
+        self,
+        kind: str,
+        label: str,
+        brdf: BrdfFn | None = None,
+        path: Path | None = None,
+        valid: np.ndarray | None = None,
+        model=None,
+        params=None,
     ):
         self.kind = kind  # "model" | "table" | "rgl"
         self.label = label
@@ -273,12 +310,20 @@ class Source:
         self.path = path
         #: (81, 81) bool: the measured UBO entries that are valid (a table source), else None
         self.valid = valid
+        #: the analytic model and its parameters (a model source), for the sampling mixture
+        self.model, self.params = model, params
         self._bsdf = None
 
     @property
     def bsdf(self):
         if self._bsdf is None:
-            self._bsdf = measured_bsdf(self.path) if self.kind == "rgl" else callback_bsdf(self._brdf, self.label)
+            if self.kind == "rgl":
+                self._bsdf = measured_bsdf(self.path)
+            else:
+                from .sampling import Mixture
+
+                mixture = Mixture.for_model(self.model, self.params) if self.model is not None else None
+                self._bsdf = callback_bsdf(self._brdf, self.label, mixture)
         return self._bsdf
 
     def brdf(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
@@ -304,10 +349,10 @@ def as_source(obj) -> Source:
     if hasattr(obj, "model") and hasattr(obj, "params"):  # a FitResult (duck-typed)
         model = models.get(obj.model)
         label = model.name if getattr(obj, "converged", True) is not False else f"{model.name} (fit not converged)"
-        return Source("model", label, model_brdf(model, obj.params))
+        return Source("model", label, model_brdf(model, obj.params), model=model, params=model.check_params(obj.params))
     if isinstance(obj, tuple) and len(obj) == 2:
         model = models.get(obj[0])
-        return Source("model", model.name, model_brdf(model, obj[1]))
+        return Source("model", model.name, model_brdf(model, obj[1]), model=model, params=model.check_params(obj[1]))
     if isinstance(obj, Measurement):
         if obj.grid != "ubo81":
             raise ValueError(
