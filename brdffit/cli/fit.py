@@ -66,17 +66,29 @@ def plot_fit(measurement, result, path: Path) -> None:
     plt.close(fig)
 
 
+# The CLI's defaults are the API's (one set of defaults, a module without heavy imports).
+from .._fit_defaults import DEFAULT_LOSS as _LOSS  # noqa: E402
+from .._fit_defaults import DEFAULT_MAX_STEPS as _MAX_STEPS  # noqa: E402
+from .._fit_defaults import DEFAULT_SOLVER as _SOLVER  # noqa: E402
+from .._fit_defaults import LOSSES as _LOSSES  # noqa: E402
+from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
+
+
 @cli.command("fit")
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx+ggx.")
-@click.option("--loss", default="log", show_default=True, help="l2 | cosine_l2 | log | cbrt | relative")
-@click.option("--solver", default="lm", show_default=True, help="lm | lmb | gauss_newton | dogleg | bfgs | scipy")
-@click.option("--multistart", default=0, show_default=True, help="Further grid starts to polish.")
-@click.option("--max-steps", default=200, show_default=True)
+@click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
+@click.option("--solver", default=_SOLVER, show_default=True, help=" | ".join(_SOLVERS))
+@click.option("--multistart", default=None, type=int,
+              help="Further grid starts solved beside the best one [default: the API's: 0, or 3 for a composite "
+                   "with repeated lobes].")
+@click.option("--max-steps", default=_MAX_STEPS, show_default=True)
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
+    from contextlib import nullcontext
+
     from rich.console import Console
 
     from .. import load
@@ -90,15 +102,25 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
     check_solver(solver)
     resolve_model(model, 3)  # unknown model -> usage error before any work
     console = Console(stderr=True)
-    with console.status(f"loading {source}"):
+    # Progress only for a person at a terminal (stderr a TTY): reading, compiling, initialising,
+    # solving, writing. (Per-step progress from inside the compiled solve would need a host
+    # callback, and JAX does not keep executables with host callbacks in its persistent cache.)
+    live = console.is_terminal
+    status = console.status(f"reading {source}") if live else nullcontext()
+    with status:
         m = load(source)
-    out = out or Path(f"fit-{m.name}-{model.replace('+', '_')}")
-    check_target(out, force)
-    with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
-        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
-    with atomic_dir(out, force) as tmp:
-        r.to_json(tmp / "fit.json")
-        plot_fit(m, r, tmp / "fit.png")
+        out = out or Path(f"fit-{m.name}-{model.replace('+', '_')}")
+        check_target(out, force)
+
+        def progress(text: str) -> None:
+            if live:
+                status.update(f"{model} on {m.name}: {text}")
+
+        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress)
+        progress("writing fit.json, fit.png")
+        with atomic_dir(out, force) as tmp:
+            r.to_json(tmp / "fit.json")
+            plot_fit(m, r, tmp / "fit.png")
     console.print(repr(r), soft_wrap=True)
     console.print(f"wrote {out}/fit.json, {out}/fit.png")
     if not r.converged:

@@ -18,10 +18,7 @@ from .problem import Data, evaluate, flat_residual, prepare, resolve_model
 from .result import FitResult
 from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_optx, solve_scipy
 
-DEFAULT_LOSS = "log"
-DEFAULT_SOLVER = "lm"
-#: Starts of a composite with repeated lobes (see ``default_starts``).
-COMPOSITE_STARTS = 4
+from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # noqa: E402
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12

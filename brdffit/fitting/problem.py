@@ -89,7 +89,8 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     sqrt_w = np.sqrt(w / (w.sum() * c))[:, None]
     cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
     mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w.sum()
-    floor = 0.01 * mean_abs + 1e-12
+    # Relative to the data (see losses: a table scaled by 1e-12 fits as the original).
+    floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
     reasons = {k: v for k, v in exclusion_reasons(m).items() if v}
     data = Data(*(jnp.asarray(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
     return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
@@ -139,7 +140,7 @@ def loss_values_fn(model: Model):
         n = jnp.sum(used) * f.shape[1]
         d = (f - ref) * used
         out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-        ld = (jnp.log(jnp.maximum(1 + f * cos_i, 1e-12)) - jnp.log(jnp.maximum(1 + ref * cos_i, 1e-12))) * used
+        ld = (L.transform("log", f, cos_i, floor) - L.transform("log", ref, cos_i, floor)) * used
         out["log_rmse"] = jnp.sqrt(jnp.sum(ld**2) / n)
         out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
         out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n

@@ -33,21 +33,16 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
 from ..errors import UsageError
 from ..models.base import Model
 from .cache import cache_enabled
 from .problem import Data, flat_residual
 
-SOLVERS = ("lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy")
 #: Solvers that run compiled (and vmap): everything but scipy.
 COMPILED_SOLVERS = SOLVERS[:-1]
 _ALIASES = {"levenberg_marquardt": "lm", "gn": "gauss_newton", "gaussnewton": "gauss_newton", "trf": "scipy"}
 
-DEFAULT_RTOL = 1e-7
-#: Absolute floor on the loss (sum of squared normalised residuals) below which a fit stops; 0 =
-#: none, so that convergence does not depend on the data's scale.
-DEFAULT_ATOL = 0.0
-DEFAULT_MAX_STEPS = 200
 
 STATUS_TEXT = {
     0: "converged",
@@ -88,10 +83,14 @@ class _LMState(eqx.Module):
 
 
 def _linearise(fn, y, args):
-    """Residual and dense Jacobian by forward mode: one linearisation, P JVPs in one vmap."""
-    r, f_jvp = jax.linearize(lambda u: fn(u, args)[0], y)
-    eye = jnp.eye(y.shape[0], dtype=y.dtype)
-    return r, jax.vmap(f_jvp, out_axes=1)(eye)
+    """Residual and dense Jacobian by forward mode (measured: jacfwd with the residual as aux
+    is 3x faster than jax.linearize + a vmap of its JVPs on ggx/UBO-81)."""
+    def f(u):
+        r = fn(u, args)[0]
+        return r, r
+
+    J, r = jax.jacfwd(f, has_aux=True)(y)
+    return r, J
 
 
 class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
@@ -103,12 +102,12 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     One iteration: residual r and Jacobian J at the current point (forward mode), g = J^T r,
     H = J^T J. Held: parameters not free, and those on a bound whose gradient points out of the
     box. The free ones solve (H + lam diag H) d = -g (Marquardt's scaling, so lam is unitless;
-    Cholesky), the trial point is v + d clipped to the box; it is accepted when the loss
+    Cholesky on the Jacobi-scaled system), the trial point is v + d clipped to the box; it is accepted when the loss
     decreases, and lam follows Nielsen's update (gain ratio of actual to predicted decrease).
 
     Convergence (all relative, so invariant under scaling the data or a parameter's units):
-    the relative decrease of the loss <= rtol *and* every parameter's step moves the residual by
-    at most sqrt(rtol) |r| (|d_i| |J_i| <= sqrt(rtol) |r|); or first-order optimality: for every
+    the actual and the predicted relative decrease of the loss are both <= rtol (MINPACK's ftol
+    test); or first-order optimality: for every
     free parameter, the cosine between r and J_i is <= rtol; or a zero loss (or one <= atol^2);
     or no damping (lam up to 1e16) finds a decrease (a minimum to machine precision).
     Otherwise the solve ends after max_steps with ``nonlinear_max_steps_reached``.
@@ -134,13 +133,18 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         H = J.T @ J
         held = (~free) | ((y <= lo) & (g > 0)) | ((y >= hi) & (g < 0))
         gf = jnp.where(held, 0.0, g)
-        dH = jnp.diag(H)
-        dH = jnp.maximum(dH, 1e-12 * jnp.max(dH) + jnp.finfo(y.dtype).tiny)
+        # Jacobi scaling (columns to unit norm; a zero column keeps scale 1): Marquardt's damping
+        # lam diag(H) becomes lam I, and the solve does not depend on the parameters' units (no
+        # floor relative to the largest column: kd and alpha columns of a table scaled by 1e-12
+        # differ by 1e12).
+        D = jnp.sqrt(jnp.diag(H))
+        D = jnp.where((D > 0) & jnp.isfinite(D), D, 1.0)
+        Hs = H / D[:, None] / D[None, :]
         mask2 = (~held)[:, None] & (~held)[None, :]
-        A = jnp.where(mask2, H + lam * jnp.diag(dH), eye)  # held: identity rows, zero gradient
+        A = jnp.where(mask2, Hs + lam * eye, eye)  # held: identity rows, zero gradient
         L = jnp.linalg.cholesky(A)
-        d = -jax.scipy.linalg.cho_solve((L, True), gf)
-        d = jnp.where(jnp.all(jnp.isfinite(d)), d, -gf / dH)
+        d = -jax.scipy.linalg.cho_solve((L, True), gf / D) / D
+        d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)
         y_new = jnp.clip(y + d, lo, hi)
         step = y_new - y
         # The trial point's residual and Jacobian together (one fused evaluation; a rejected
@@ -158,18 +162,18 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         J_next = jnp.where(accept, J_new, J)
         c_next = jnp.where(accept, c_new, c)
 
-        col = jnp.sqrt(jnp.diag(J_next.T @ J_next))
-        col_floor = 1e-12 * jnp.max(col) + jnp.finfo(y.dtype).tiny
+        col = jnp.sqrt(jnp.sum(J_next * J_next, axis=0))
+        col = jnp.where(col > 0, col, 1.0)  # a zero column has a zero gradient
         norm_r = jnp.sqrt(c_next)
-        small_f = accept & ((c - c_new) <= self.rtol * c)
-        small_x = jnp.max(jnp.abs(step) * col) <= jnp.sqrt(self.rtol) * jnp.sqrt(c)
+        # MINPACK's test: both the actual and the predicted relative decrease are small.
+        small_f = accept & ((c - c_new) <= self.rtol * c) & (pred <= self.rtol * c) & (rho <= 2.0)
         g_next = J_next.T @ r_next
         held_next = (~free) | ((y_next <= lo) & (g_next > 0)) | ((y_next >= hi) & (g_next < 0))
-        cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (jnp.maximum(col, col_floor) * norm_r))
+        cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (col * norm_r))
         small_g = jnp.max(cosine) <= self.rtol
         exact = c_next <= self.atol**2
         stuck = (~accept) & (lam_next > 1e16)
-        done = (small_f & small_x) | small_g | exact | stuck
+        done = small_f | small_g | exact | stuck
         result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
         new_state = _LMState(r=r_next, J=J_next, lam=lam_next, nu=nu_next, done=done, result=result)
         return y_next, new_state, None
@@ -212,7 +216,10 @@ def from_box(v, lo, hi):
     return jnp.where(log, jnp.log(jnp.where(log, v, 1.0)), v)
 
 
-def stock_solver(name: str, rtol: float, atol: float):
+def make_solver(name: str, rtol: float, atol: float):
+    """The optimistix solver object behind a solver name (not ``scipy``)."""
+    if name == "lm":
+        return BoundedLevenbergMarquardt(rtol=rtol, atol=atol)
     # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
     # for rank-deficient systems (SVD).
     if name == "optx_lm":
@@ -250,8 +257,8 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
         return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), code, steps
 
+    solver = make_solver(solver_name, rtol, atol)
     if solver_name == "lm":
-        solver = BoundedLevenbergMarquardt(rtol=rtol, atol=atol)
 
         def run(v0, data, lo, hi, free):
             v0 = jnp.clip(v0, lo, hi)
@@ -261,8 +268,6 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
             return finish(v0, sol.value, _status_code(sol.result), sol.stats["num_steps"], data)
 
         return run
-
-    solver = stock_solver(solver_name, rtol, atol)
 
     def run(v0, data, lo, hi, free):
         """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
