@@ -74,23 +74,27 @@ def _status_code(result) -> jax.Array:
 
 # -- brdffit's bounded Levenberg-Marquardt as an optimistix solver ------------------------------
 class _LMState(eqx.Module):
-    r: Float[Array, " M"]
-    J: Float[Array, "M P"]
+    # The normal equations at the current point, not the Jacobian: a small loop carry (the
+    # (M, P) Jacobian would be copied through the loop at every step).
+    c: Float[Array, ""]
+    g: Float[Array, " P"]
+    H: Float[Array, "P P"]
     lam: Float[Array, ""]
     nu: Float[Array, ""]
     done: Bool[Array, ""]
     result: optx.RESULTS
 
 
-def _linearise(fn, y, args):
-    """Residual and dense Jacobian by forward mode (measured: jacfwd with the residual as aux
-    is 3x faster than jax.linearize + a vmap of its JVPs on ggx/UBO-81)."""
+def _normal_equations(fn, y, args):
+    """Loss r.r, gradient J^T r and Gauss-Newton matrix J^T J at y, with the Jacobian by forward
+    mode (measured: jacfwd with the residual as aux is 3x faster than jax.linearize + a vmap of
+    its JVPs on ggx/UBO-81)."""
     def f(u):
         r = fn(u, args)[0]
         return r, r
 
     J, r = jax.jacfwd(f, has_aux=True)(y)
-    return r, J
+    return r @ r, J.T @ r, J.T @ J
 
 
 class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
@@ -99,18 +103,19 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     options: ``lower``, ``upper`` (P,) bounds (may be infinite), ``free`` (P,) bool (False: held at
     the start value). The start must lie in the box.
 
-    One iteration: residual r and Jacobian J at the current point (forward mode), g = J^T r,
-    H = J^T J. Held: parameters not free, and those on a bound whose gradient points out of the
-    box. The free ones solve (H + lam diag H) d = -g (Marquardt's scaling, so lam is unitless;
-    Cholesky on the Jacobi-scaled system), the trial point is v + d clipped to the box; it is accepted when the loss
-    decreases, and lam follows Nielsen's update (gain ratio of actual to predicted decrease).
+    One iteration: with r and J the residual and Jacobian at the current point (forward mode),
+    g = J^T r, H = J^T J. Held: parameters not free, and those on a bound whose gradient points
+    out of the box. The free ones solve (H + lam diag H) d = -g (Marquardt's scaling, so lam is
+    unitless; Cholesky on the Jacobi-scaled system), the trial point is v + d clipped to the box;
+    it is accepted when the loss decreases, and lam follows Nielsen's update (gain ratio of actual
+    to predicted decrease).
 
     Convergence (all relative, so invariant under scaling the data or a parameter's units):
     the actual and the predicted relative decrease of the loss are both <= rtol (MINPACK's ftol
-    test); or first-order optimality: for every
-    free parameter, the cosine between r and J_i is <= rtol; or a zero loss (or one <= atol^2);
-    or no damping (lam up to 1e16) finds a decrease (a minimum to machine precision).
-    Otherwise the solve ends after max_steps with ``nonlinear_max_steps_reached``.
+    test); or first-order optimality: for every free parameter, the cosine between r and J_i is
+    <= rtol; or a zero loss (or one <= atol^2); or no damping (lam up to 1e16) finds a decrease
+    (a minimum to machine precision). Otherwise the solve ends after max_steps with
+    ``nonlinear_max_steps_reached``.
     """
 
     rtol: float
@@ -118,19 +123,15 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     norm: Callable = optx.max_norm
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        r, J = _linearise(fn, y, args)
+        c, g, H = _normal_equations(fn, y, args)
         dtype = y.dtype
-        return _LMState(r=r, J=J, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
+        return _LMState(c=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
                         done=jnp.asarray(False), result=optx.RESULTS.successful)
 
     def step(self, fn, y, args, options, state: _LMState, tags):
         lo, hi, free = options["lower"], options["upper"], options["free"]
-        r, J, lam, nu = state.r, state.J, state.lam, state.nu
-        P = y.shape[0]
-        eye = jnp.eye(P, dtype=y.dtype)
-        c = r @ r
-        g = J.T @ r
-        H = J.T @ J
+        c, g, H, lam, nu = state.c, state.g, state.H, state.lam, state.nu
+        eye = jnp.eye(y.shape[0], dtype=y.dtype)
         held = (~free) | ((y <= lo) & (g > 0)) | ((y >= hi) & (g < 0))
         gf = jnp.where(held, 0.0, g)
         # Jacobi scaling (columns to unit norm; a zero column keeps scale 1): Marquardt's damping
@@ -147,42 +148,39 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)
         y_new = jnp.clip(y + d, lo, hi)
         step = y_new - y
-        # The trial point's residual and Jacobian together (one fused evaluation; a rejected
+        # The trial point's loss and normal equations together (one fused evaluation; a rejected
         # trial wastes the Jacobian, but near convergence nearly every trial is accepted, and
         # under vmap a branch would evaluate both sides anyway).
-        r_new, J_new = _linearise(fn, y_new, args)
-        c_new = r_new @ r_new
+        c_new, g_new, H_new = _normal_equations(fn, y_new, args)
         pred = -(2.0 * gf @ step + step @ (H @ step))
         rho = (c - c_new) / jnp.maximum(pred, jnp.finfo(y.dtype).tiny)
-        accept = jnp.isfinite(c_new) & (c_new < c) & jnp.all(jnp.isfinite(J_new))
+        accept = jnp.isfinite(c_new) & (c_new < c) & jnp.all(jnp.isfinite(H_new))
         lam_next = jnp.where(accept, lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu)
         nu_next = jnp.where(accept, 2.0, nu * 2.0)
         y_next = jnp.where(accept, y_new, y)
-        r_next = jnp.where(accept, r_new, r)
-        J_next = jnp.where(accept, J_new, J)
         c_next = jnp.where(accept, c_new, c)
+        g_next = jnp.where(accept, g_new, g)
+        H_next = jnp.where(accept, H_new, H)
 
-        col = jnp.sqrt(jnp.sum(J_next * J_next, axis=0))
-        col = jnp.where(col > 0, col, 1.0)  # a zero column has a zero gradient
-        norm_r = jnp.sqrt(c_next)
         # MINPACK's test: both the actual and the predicted relative decrease are small.
         small_f = accept & ((c - c_new) <= self.rtol * c) & (pred <= self.rtol * c) & (rho <= 2.0)
-        g_next = J_next.T @ r_next
+        col = jnp.sqrt(jnp.diag(H_next))
+        col = jnp.where(col > 0, col, 1.0)  # a zero column has a zero gradient
         held_next = (~free) | ((y_next <= lo) & (g_next > 0)) | ((y_next >= hi) & (g_next < 0))
-        cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (col * norm_r))
+        cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (col * jnp.sqrt(c_next)))
         small_g = jnp.max(cosine) <= self.rtol
         exact = c_next <= self.atol**2
         stuck = (~accept) & (lam_next > 1e16)
         done = small_f | small_g | exact | stuck
         result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
-        new_state = _LMState(r=r_next, J=J_next, lam=lam_next, nu=nu_next, done=done, result=result)
+        new_state = _LMState(c=c_next, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result)
         return y_next, new_state, None
 
     def terminate(self, fn, y, args, options, state: _LMState, tags):
         return state.done, state.result
 
     def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
-        return y, aux, {"loss": state.r @ state.r}
+        return y, aux, {"loss": state.c}
 
 
 # -- optimistix's stock solvers on an unconstrained variable ------------------------------------
