@@ -245,6 +245,7 @@ def bench_batch(n: int) -> int:
     steps = [r.steps for r in rs]
     print(f"fit_batch ggx, {n} UBO-81 texels: {dt:.2f} s = {n / dt:.0f} texels/s, steps max {max(steps)} median "
           f"{int(np.median(steps))}, converged {sum(r.converged for r in rs)}/{n}; devices {jax.devices()}")
+    brdffit.fit(ms[0], "ggx")  # warm-up (compiles)
     t0 = time.perf_counter()
     for m in ms[:8]:
         brdffit.fit(m, "ggx")

@@ -25,12 +25,19 @@ STDERR_MAX_COND = 1e12
 
 
 @functools.lru_cache(maxsize=None)
-def _jacobian_fn(model: Model, loss: str):
-    return jax.jit(jax.jacfwd(flat_residual(model, loss)))
+def normal_matrix_fn(model: Model, loss: str):
+    """(v, data) -> J^T J of the residual at v (what the standard errors need of J)."""
+    jac = jax.jacfwd(flat_residual(model, loss))
+
+    def fn(v, data):
+        J = jac(v, data)
+        return J.T @ J
+
+    return fn
 
 
-def standard_errors(model: Model, loss: str, params, data: Data, loss_value: float, n_residuals: int,
-                    lo=None, hi=None, free=None):
+def standard_errors(model: Model, loss: str, params, data: Data | None, loss_value: float, n_residuals: int,
+                    lo=None, hi=None, free=None, jtj=None):
     """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
 
     None for a parameter at one of its bounds (the active constraint makes the Gaussian
@@ -40,7 +47,8 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     seen), or Lafortune's rho and |C| (only rho |C|^n is seen).
     """
     v = np.asarray(model.flatten(params))
-    J = np.asarray(_jacobian_fn(model, loss)(jnp.asarray(v), data))
+    if jtj is None:
+        jtj = np.asarray(jax.jit(normal_matrix_fn(model, loss))(jnp.asarray(v), data))
     if lo is None or hi is None:
         lo, hi = model.bounds()
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
@@ -48,14 +56,15 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     at_bound = (np.abs(v - lo) <= tol) | (np.abs(v - hi) <= tol)
     free = ~at_bound if free is None else (np.asarray(free, bool) & ~at_bound)
     out: dict[str, np.ndarray | None] = {p.name: None for p in model.params}
-    if not free.any() or not np.all(np.isfinite(J)):
+    jtj = np.asarray(jtj, dtype=np.float64)
+    if not free.any() or not np.all(np.isfinite(jtj)):
         return out
-    Jf = J[:, free]
+    Hf = jtj[np.ix_(free, free)]
     # Column scaling, so that the conditioning test does not depend on parameter units.
-    scale = np.linalg.norm(Jf, axis=0)
+    scale = np.sqrt(np.maximum(np.diag(Hf), 0.0))
     if np.any(scale == 0):
         scale = np.where(scale == 0, 1.0, scale)
-    jtj = (Jf / scale).T @ (Jf / scale)
+    jtj = Hf / scale[:, None] / scale[None, :]
     w, V = np.linalg.eigh(jtj)
     small = w <= w[-1] / STDERR_MAX_COND
     dof = max(n_residuals - int(free.sum()), 1)
@@ -198,10 +207,12 @@ def fit(
                             "starts": int(len(starts)), "init": "grid" if init is None else "given"})
 
 
-def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free, *, seconds, options) -> FitResult:
+def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free, *, seconds, options,
+            metrics=None, jtj=None) -> FitResult:
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
-    metrics = evaluate(m, params, prep.data)
-    stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free)
+    if metrics is None:
+        metrics = evaluate(m, params, prep.data)
+    stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:
         status = "converged (scipy least_squares)"

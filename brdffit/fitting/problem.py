@@ -129,6 +129,12 @@ def flat_residual(model: Model, loss: str):
 @functools.lru_cache(maxsize=None)
 def loss_values_fn(model: Model):
     """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
+    return jax.jit(loss_values(model))
+
+
+@functools.lru_cache(maxsize=None)
+def loss_values(model: Model):
+    """flat params, data -> every loss's value and the metrics (jit-able)."""
 
     def fn(v, data):
         params = model.unflatten(v)
@@ -147,7 +153,7 @@ def loss_values_fn(model: Model):
         out["max_abs_error"] = jnp.max(jnp.abs(d))
         return out
 
-    return jax.jit(fn)
+    return fn
 
 
 def evaluate(model: Model, params, data: Data) -> dict[str, float]:
