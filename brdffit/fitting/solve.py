@@ -37,6 +37,7 @@ from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVE
 from ..errors import UsageError
 from ..models.base import Model
 from .cache import cache_enabled
+from . import losses as L
 from .problem import Data, flat_residual
 
 #: Solvers that run compiled (and vmap): everything but scipy.
@@ -113,7 +114,8 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     Convergence (all relative, so invariant under scaling the data or a parameter's units):
     the actual and the predicted relative decrease of the loss are both <= rtol (MINPACK's ftol
     test); or first-order optimality: for every free parameter, the cosine between r and J_i is
-    <= rtol; or a zero loss (or one <= atol^2); or no damping (lam up to 1e16) finds a decrease
+    <= rtol; or an exact fit: a loss <= options["loss_floor"] (``solve_one`` passes 1e-26 x the
+    loss of the zero model, i.e. residuals at roundoff level relative to the data), or <= atol^2; or no damping (lam up to 1e16) finds a decrease
     (a minimum to machine precision). Otherwise the solve ends after max_steps with
     ``nonlinear_max_steps_reached``.
     """
@@ -169,7 +171,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         held_next = (~free) | ((y_next <= lo) & (g_next > 0)) | ((y_next >= hi) & (g_next < 0))
         cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (col * jnp.sqrt(c_next)))
         small_g = jnp.max(cosine) <= self.rtol
-        exact = c_next <= self.atol**2
+        exact = c_next <= jnp.maximum(self.atol**2, options.get("loss_floor", 0.0))
         stuck = (~accept) & (lam_next > 1e16)
         done = small_f | small_g | exact | stuck
         result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
@@ -243,6 +245,12 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
     """
     fn = flat_residual(model, loss)
 
+    def loss_floor(data):
+        """Loss of an exact fit, relative to the data: (1e-13)^2 x the loss of f = 0."""
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor)
+        return 1e-26 * jnp.sum(r0 * r0)
+
     def loss_of(v, data):
         r = fn(v, data)
         return r @ r
@@ -250,7 +258,8 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
     def finish(v0, v, code, steps, data):
         l0 = loss_of(v0, data)
         l1 = loss_of(v, data)
-        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0)
+        # Worse than the start (beyond roundoff): a stock solver wandered off.
+        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
         code = jnp.where(ok | (code != 0), code, 2)
         code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
         return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), code, steps
@@ -261,7 +270,8 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         def run(v0, data, lo, hi, free):
             v0 = jnp.clip(v0, lo, hi)
             sol = optx.least_squares(lambda v, d: fn(v, d), solver, v0, args=data,
-                                     options={"lower": lo, "upper": hi, "free": free},
+                                     options={"lower": lo, "upper": hi, "free": free,
+                                              "loss_floor": loss_floor(data)},
                                      max_steps=max_steps, throw=False)
             return finish(v0, sol.value, _status_code(sol.result), sol.stats["num_steps"], data)
 
@@ -375,7 +385,8 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
     t0 = time.perf_counter()
     sol = least_squares(
         f, v_full[free], jac=j if jac == "exact" else jac, bounds=(lo[free], hi[free]), method="trf",
-        ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=max(rtol, 1e-15), max_nfev=max_steps * 10,
+        # scipy's gtol is absolute (on the scaled gradient): left at its floor, ftol/xtol stop it.
+        ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=1e-15, max_nfev=max_steps * 10,
     )
     run_s = time.perf_counter() - t0
     v = np.asarray(expand(sol.x))
