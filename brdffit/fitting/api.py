@@ -14,8 +14,9 @@ from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
 from .losses import check_loss
-from .problem import Data, evaluate, flat_residual, prepare, resolve_model
+from .problem import Data, flat_residual, loss_values, prepare, resolve_model
 from .result import FitResult
+from .solve import compiled
 from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_optx, solve_scipy
 
 from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # noqa: E402
@@ -210,8 +211,13 @@ def fit(
 def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free, *, seconds, options,
             metrics=None, jtj=None) -> FitResult:
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
-    if metrics is None:
-        metrics = evaluate(m, params, prep.data)
+    if metrics is None or jtj is None:
+        # Through the disk cache, like the solve (a second process traces nothing).
+        args = (jnp.asarray(v, dtype=jnp.float64), prep.data)
+        metrics_fn, _ = compiled(("metrics", m), lambda: loss_values(m), *args)
+        jtj_fn, _ = compiled(("jtj", m, loss), lambda: normal_matrix_fn(m, loss), *args)
+        metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
+        jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:

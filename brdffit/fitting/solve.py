@@ -36,7 +36,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
 from ..errors import UsageError
 from ..models.base import Model
-from .cache import cache_enabled
+from .cache import cache_enabled, exported
 from . import losses as L
 from .problem import Data, flat_residual
 
@@ -328,8 +328,11 @@ def _shape_key(tree):
 
 
 def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
-    """Compile ``build()`` for these argument shapes once per process (and, through JAX's
-    persistent cache, once per machine); returns (compiled function, compile seconds this call)."""
+    """Compile ``build()`` for these argument shapes once per process and, through the disk cache
+    (``cache``), once per machine; returns (compiled function, compile seconds this call).
+
+    On disk: JAX's persistent cache keeps the compiled code, and ``cache.exported`` keeps the
+    traced program (``jax.export``), so that a second process skips tracing optimistix too."""
     full = (key, _shape_key(example))
     hit = _CACHE.get(full)
     if hit is not None:
@@ -337,7 +340,7 @@ def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str],
     if note is not None:
         note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
     t0 = time.perf_counter()
-    fn = jax.jit(build()).lower(*example).compile()
+    fn = exported(key, build, example)
     dt = time.perf_counter() - t0
     _CACHE[full] = fn
     return fn, dt
