@@ -107,16 +107,6 @@ def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Arr
 
 
 @functools.lru_cache(maxsize=None)
-def unconstrained_residual(model: Model, loss: str):
-    """r(x, data) with x on the solver's unconstrained axes (fold transform, see models.base)."""
-
-    def fn(x, data):
-        return residual_of_params(model, loss, model.from_unconstrained(x), data)
-
-    return fn
-
-
-@functools.lru_cache(maxsize=None)
 def flat_residual(model: Model, loss: str):
     """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
 
