@@ -184,3 +184,22 @@ def test_batch_equals_single_fits():
         for k in single.params:
             np.testing.assert_allclose(r.params[k], single.params[k], rtol=1e-7, atol=1e-12)
 
+
+
+def test_cli_defaults_are_the_apis():
+    import inspect
+
+    from brdffit.cli import _load_commands, cli
+
+    _load_commands()
+    options = {p.name: p.default for p in cli.commands["fit"].params}
+    api = inspect.signature(fit).parameters
+    for name in ("loss", "solver", "multistart", "max_steps"):
+        assert options[name] == api[name].default, name
+
+
+def test_progress_reports_the_phases():
+    seen = []
+    fit(_measurement(n=200), "ggx", progress=seen.append)
+    text = " | ".join(seen)
+    assert "initialising" in text and "solving" in text and "solved" in text
