@@ -98,6 +98,10 @@ def _normal_equations(fn, y, args):
     return r @ r, J.T @ r, J.T @ J
 
 
+#: Largest factor by which a parameter with a positive lower bound changes in one step.
+STEP_FACTOR = 4.0
+
+
 class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     """Projected Levenberg-Marquardt with an active set per iteration, for a flat parameter vector.
 
@@ -148,7 +152,15 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         L = jnp.linalg.cholesky(A)
         d = -jax.scipy.linalg.cho_solve((L, True), gf / D) / D
         d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)
-        y_new = jnp.clip(y + d, lo, hi)
+        # Parameters with a positive lower bound (roughness, exponents) move by at most a factor
+        # STEP_FACTOR per step (a trust region on their log axis, scale-free): the roughness of a
+        # lobe narrower than the sample spacing has a ~0 column, and its Gauss-Newton step
+        # (1e16 on torrance_sparrow) would throw it to the far bound, so that every trial was
+        # rejected and the damping ran out ("converged" at a poor point).
+        pos = lo > 0
+        lo_t = jnp.maximum(lo, jnp.where(pos, y / STEP_FACTOR, -jnp.inf))
+        hi_t = jnp.minimum(hi, jnp.where(pos, y * STEP_FACTOR, jnp.inf))
+        y_new = jnp.clip(y + d, lo_t, hi_t)
         step = y_new - y
         # The trial point's loss and normal equations together (one fused evaluation; a rejected
         # trial wastes the Jacobian, but near convergence nearly every trial is accepted, and
