@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from .._fit_defaults import COMPARE_SOLVERS as DEFAULT_SOLVERS
 from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
 
@@ -35,7 +36,7 @@ def print_report(report, loss: str, console) -> None:
 @cli.command("compare")
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--models", multiple=True, help="Models (repeat or comma-separate) [all base models].")
-@click.option("--solvers", multiple=True, help="Solvers [lm, lmb, dogleg, bfgs, scipy].")
+@click.option("--solvers", multiple=True, help=f"Solvers [{', '.join(DEFAULT_SOLVERS)}]; also gauss_newton.")
 @click.option("--losses", multiple=True, help="Losses [log].")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [compare-<name>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
@@ -56,7 +57,7 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
         if given and not _split(given):  # e.g. --models ",,": refuse rather than run everything
             raise click.UsageError(f"{option}: empty list")
     models = _split(models) or _models.names()
-    solvers = [check_solver(s) for s in (_split(solvers) or ["lm", "lmb", "dogleg", "bfgs", "scipy"])]
+    solvers = [check_solver(s) for s in (_split(solvers) or list(DEFAULT_SOLVERS))]
     losses = [check_loss(x) for x in (_split(losses) or ["log"])]
     for name in models:
         check_model(name)

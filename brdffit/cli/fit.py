@@ -66,17 +66,29 @@ def plot_fit(measurement, result, path: Path) -> None:
     plt.close(fig)
 
 
+# The CLI's defaults are the API's (one set of defaults, a module without heavy imports).
+from .._fit_defaults import DEFAULT_LOSS as _LOSS  # noqa: E402
+from .._fit_defaults import DEFAULT_MAX_STEPS as _MAX_STEPS  # noqa: E402
+from .._fit_defaults import DEFAULT_SOLVER as _SOLVER  # noqa: E402
+from .._fit_defaults import LOSSES as _LOSSES  # noqa: E402
+from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
+
+
 @cli.command("fit")
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx+ggx.")
-@click.option("--loss", default="log", show_default=True, help="l2 | cosine_l2 | log | cbrt | relative")
-@click.option("--solver", default="lm", show_default=True, help="lm | lmb | gauss_newton | dogleg | bfgs | scipy")
-@click.option("--multistart", type=click.IntRange(min=0), default=0, show_default=True, help="Further grid starts to polish.")
-@click.option("--max-steps", type=click.IntRange(min=1), default=200, show_default=True)
+@click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
+@click.option("--solver", default=_SOLVER, show_default=True, help=" | ".join(_SOLVERS))
+@click.option("--multistart", default=None, type=click.IntRange(min=0),
+              help="Further grid starts solved beside the best one [default: the API's: 0, or 3 for a composite "
+                   "with repeated lobes].")
+@click.option("--max-steps", type=click.IntRange(min=1), default=_MAX_STEPS, show_default=True)
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
+    from contextlib import nullcontext
+
     from rich.console import Console
 
     from .. import load
@@ -91,16 +103,25 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
     check_solver(solver)
     check_model(model)  # unknown or impossible model -> usage error before any work
     console = Console(stderr=True)
+    # Progress only for a person at a terminal (stderr a TTY): reading, compiling, initialising,
+    # solving, writing. (Per-step progress from inside the compiled solve would need a host
+    # callback, and JAX does not keep executables with host callbacks in its persistent cache.)
+    live = console.is_terminal
     with contextlib.ExitStack() as stack:
         if out is not None:  # checked, writable and locked before any work
             stack.enter_context(reserve(out, force, folder=True))
-        with console.status(f"loading {source}"):
-            m = load(source)
+        status = stack.enter_context(console.status(f"reading {source}") if live else nullcontext())
+        m = load(source)
         if out is None:
             out = Path(f"fit-{m.name}-{model.replace('+', '_')}")
             stack.enter_context(reserve(out, force, folder=True))
-        with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
-            r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
+
+        def progress(text: str) -> None:
+            if live:
+                status.update(f"{model} on {m.name}: {text}")
+
+        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress)
+        progress("writing fit.json, fit.png")
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
             plot_fit(m, r, tmp / "fit.png")

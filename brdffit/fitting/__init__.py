@@ -1,22 +1,27 @@
 """Fitting engine (SPEC 5): ``fit``, ``fit_batch``, ``FitResult``, ``compare``, ``Report``, ``select``.
 
 Pipeline of one fit: ``problem.prepare`` (exclude and count invalid samples, normalise weights)
--> ``init.best_starts`` (variable-projection grid: nonlinear parameters on a coarse grid, linear
-ones by bounded least squares) -> a compiled solve (exact forward-mode Jacobians, float64):
-optimistix ``lm`` / ``gauss_newton`` / ``dogleg`` / ``bfgs`` on the fold-transformed axes with an
-active set for optima on bounds, brdffit's own projected Levenberg-Marquardt ``lmb`` on the
-bounded values (the fastest, see benchmarks/bench_fit.py), or scipy ``least_squares`` (TRF) as
-the reference -> ``FitResult`` with metrics and standard errors.
+-> ``init.best_starts`` (variable-projection grid: nonlinear parameters on a small structure-aware
+grid, linear ones by bounded least squares) -> one compiled, vmapped solve of the best starts
+(exact forward-mode Jacobians, float64): ``lm``, brdffit's bounded Levenberg-Marquardt as an
+optimistix solver class (``solve.BoundedLevenbergMarquardt``), or optimistix's stock ``optx_lm`` /
+``gauss_newton`` / ``dogleg`` / ``bfgs`` on a transformed unconstrained variable, or scipy
+``least_squares`` (TRF) as the reference -> ``FitResult`` with metrics and standard errors.
+Compiled code is kept on disk (``cache``).
 """
 
 from __future__ import annotations
 
-from .api import fit
-from .batch import fit_batch
-from .compare import Report, compare
-from .losses import LOSSES
-from .result import FitResult
-from .select import Selection, select
-from .solve import SOLVERS
+from . import cache as _cache
+
+_cache.enable()  # before anything compiles
+
+from .api import fit  # noqa: E402
+from .batch import fit_batch  # noqa: E402
+from .compare import Report, compare  # noqa: E402
+from .losses import LOSSES  # noqa: E402
+from .result import FitResult  # noqa: E402
+from .select import Selection, select  # noqa: E402
+from .solve import SOLVERS  # noqa: E402
 
 __all__ = ["LOSSES", "SOLVERS", "FitResult", "Report", "Selection", "compare", "fit", "fit_batch", "select"]

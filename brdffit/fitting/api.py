@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import jax
 import jax.numpy as jnp
@@ -14,32 +14,31 @@ from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
 from .losses import check_loss
-from .problem import Data, evaluate, flat_residual, prepare, resolve_model
+from .problem import Data, flat_residual, loss_values, prepare, resolve_model
 from .result import FitResult
-from .solve import (
-    DEFAULT_ATOL,
-    DEFAULT_MAX_STEPS,
-    DEFAULT_RTOL,
-    STATUS_TEXT,
-    check_solver,
-    solve_lmb,
-    solve_optx,
-    solve_scipy,
-)
+from .solve import compiled
+from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_optx, solve_scipy
 
-#: Further grid starts tried by default when the first solve does not converge.
-AUTO_RETRIES = 2
+from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # noqa: E402
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
 
 
 @functools.lru_cache(maxsize=None)
-def _jacobian_fn(model: Model, loss: str):
-    return jax.jit(jax.jacfwd(flat_residual(model, loss)))
+def normal_matrix_fn(model: Model, loss: str):
+    """(v, data) -> J^T J of the residual at v (what the standard errors need of J)."""
+    jac = jax.jacfwd(flat_residual(model, loss))
+
+    def fn(v, data):
+        J = jac(v, data)
+        return J.T @ J
+
+    return fn
 
 
-def standard_errors(model: Model, loss: str, params, data: Data, loss_value: float, n_residuals: int):
+def standard_errors(model: Model, loss: str, params, data: Data | None, loss_value: float, n_residuals: int,
+                    lo=None, hi=None, free=None, jtj=None):
     """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
 
     None for a parameter at one of its bounds (the active constraint makes the Gaussian
@@ -49,20 +48,24 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     seen), or Lafortune's rho and |C| (only rho |C|^n is seen).
     """
     v = np.asarray(model.flatten(params))
-    J = np.asarray(_jacobian_fn(model, loss)(jnp.asarray(v), data))
-    lo, hi = model.bounds()
-    span = hi - lo
-    at_bound = (np.abs(v - lo) <= 1e-9 * span + 1e-300) | (np.abs(v - hi) <= 1e-9 * span)
-    free = ~at_bound
+    if jtj is None:
+        jtj = np.asarray(jax.jit(normal_matrix_fn(model, loss))(jnp.asarray(v), data))
+    if lo is None or hi is None:
+        lo, hi = model.bounds()
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    tol = 1e-9 * np.maximum(np.abs(v), 1e-300)
+    at_bound = (np.abs(v - lo) <= tol) | (np.abs(v - hi) <= tol)
+    free = ~at_bound if free is None else (np.asarray(free, bool) & ~at_bound)
     out: dict[str, np.ndarray | None] = {p.name: None for p in model.params}
-    if not free.any() or not np.all(np.isfinite(J)):
+    jtj = np.asarray(jtj, dtype=np.float64)
+    if not free.any() or not np.all(np.isfinite(jtj)):
         return out
-    Jf = J[:, free]
+    Hf = jtj[np.ix_(free, free)]
     # Column scaling, so that the conditioning test does not depend on parameter units.
-    scale = np.linalg.norm(Jf, axis=0)
+    scale = np.sqrt(np.maximum(np.diag(Hf), 0.0))
     if np.any(scale == 0):
         scale = np.where(scale == 0, 1.0, scale)
-    jtj = (Jf / scale).T @ (Jf / scale)
+    jtj = Hf / scale[:, None] / scale[None, :]
     w, V = np.linalg.eigh(jtj)
     small = w <= w[-1] / STDERR_MAX_COND
     dof = max(n_residuals - int(free.sum()), 1)
@@ -84,82 +87,7 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     return out
 
 
-#: Steps per solve of the active-set loop (the solver restarts after each, keeping its iterate).
-ROUND_STEPS = 20  # measured: 50 let the first round crawl along a bound for ~50 steps
-#: A parameter within this fraction of its axis from a bound, with the gradient pointing out of
-#: the box, is snapped onto the bound and held there.
-NEAR_BOUND = 1e-3
-
-
-def _axis_distance(model: Model, v: np.ndarray):
-    """Distance of each flat parameter to its lower / upper bound, in fractions of its axis."""
-    lo_all, hi_all = [], []
-    i = 0
-    for p in model.params:
-        n = model.size(p)
-        x = v[i : i + n]
-        if p.scale == "log":
-            a, b, y = np.log(p.lower), np.log(p.upper), np.log(np.maximum(x, p.lower))
-        else:
-            a, b, y = p.lower, p.upper, x
-        w = max(b - a, 1e-300)
-        lo_all.append((y - a) / w)
-        hi_all.append((b - y) / w)
-        i += n
-    return np.concatenate(lo_all), np.concatenate(hi_all)
-
-
-def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol, atol, max_steps):
-    """Solve with an active set of parameters held at their bounds.
-
-    The fold transform (models.base) keeps iterates in the box, but when the optimum lies *on* a
-    bound (ks = 1, kd = 0 ...) the loss seen by the solver has a kink there (a reflection), and a
-    Gauss-Newton method zig-zags across it, or stops early beside it. So the solve runs in rounds
-    of at most ROUND_STEPS steps: after each, parameters within NEAR_BOUND of a bound whose
-    gradient points out of the box are snapped onto the bound and held (zero Jacobian column),
-    and held parameters whose gradient points back into the box are released (KKT check). It
-    ends when a round converges with an unchanged active set, or after ``max_steps`` in total.
-    """
-    v = np.asarray(v0, dtype=np.float64).copy()
-    lo, hi = m.bounds()
-    held = np.zeros(v.shape, bool)
-    total_steps = 0
-    compile_s = run_s = 0.0
-    value, code = None, 1
-    jac = _jacobian_fn(m, loss)
-    res = flat_residual(m, loss)
-    # BFGS builds its Hessian estimate over the iterations: a restart would throw it away.
-    round_steps = max_steps if solver == "bfgs" else min(ROUND_STEPS, max_steps)
-    while True:
-        g = np.asarray(jac(jnp.asarray(v), data)).T @ np.asarray(res(jnp.asarray(v), data))
-        d_lo, d_hi = _axis_distance(m, v)
-        out_lo = (d_lo <= NEAR_BOUND) & (g > 0)
-        out_hi = (d_hi <= NEAR_BOUND) & (g < 0)
-        new_held = out_lo | out_hi
-        if value is None:
-            # First round: everything free. (Holding parameters that the start puts on a bound
-            # can trap the solve in a corner that is a constrained local minimum only.)
-            new_held = np.zeros(v.shape, bool)
-            out_lo = out_hi = new_held
-        elif code == 0 and np.array_equal(new_held, held):
-            break
-        if total_steps >= max_steps:
-            code = code if code != 0 else 1
-            break
-        held = new_held
-        v = np.where(out_lo, lo, np.where(out_hi, hi, v))
-        x0 = jnp.asarray(m.to_unconstrained(m.unflatten(jnp.asarray(v))))
-        x, value, code, steps, c_s, r_s = solve_optx(
-            m, loss, solver, x0, data, ~held, rtol=rtol, atol=atol, max_steps=round_steps
-        )
-        total_steps += max(steps, 1)
-        compile_s += c_s
-        run_s += r_s
-        v = np.asarray(m.flatten(m.from_unconstrained(jnp.asarray(x))))
-    return v, value, code, total_steps, compile_s, run_s
-
-
-def _start_from(init, model: Model) -> np.ndarray:
+def _start_from(init, model: Model, lo, hi) -> np.ndarray:
     if isinstance(init, FitResult):
         init = init.params
     if isinstance(init, str):
@@ -174,77 +102,123 @@ def _start_from(init, model: Model) -> np.ndarray:
         v = np.asarray(model.flatten(full))
     except ValueError as exc:
         raise UsageError(f"init: {exc}") from None
-    lo, hi = model.bounds()
     return np.clip(v, lo, hi)
+
+
+def default_starts(model: Model) -> int:
+    """Starts solved at once (one vmapped solve) when the caller does not say: 1, or
+    COMPOSITE_STARTS for a composite with several lobes of one kind. Measured (lambert+ggx+ggx,
+    the 4 shared RGL files): the structure-aware grid (lobes at separated roughnesses, see
+    ``init``) puts the best start in the best basin; 4 starts reached the same loss (to 1e-8) at
+    3-5x the time, so COMPOSITE_STARTS is 1. ``multistart=k`` adds k starts."""
+    kinds = [c.name for c in model.components]
+    return COMPOSITE_STARTS if len(kinds) != len(set(kinds)) else 1
+
+
+def parameter_space(model: Model):
+    """Flat lower / upper bounds (may be infinite) and the free mask of ``model``."""
+    # parameter space (h-params replaces this)
+    lo, hi = model.bounds()
+    free = np.ones(model.n_free, bool)
+    return np.asarray(lo, float), np.asarray(hi, float), free
+
+
+def _quiet(_message: str) -> None:
+    pass
 
 
 def fit(
     measurement: Measurement,
     model: str | Model,
     *,
-    loss: str = "log",
-    solver: str = "lm",
+    loss: str = DEFAULT_LOSS,
+    solver: str = DEFAULT_SOLVER,
     init=None,
     multistart: int | None = None,
     max_steps: int = DEFAULT_MAX_STEPS,
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
     weights=None,
-    grid_budget: int = _init.GRID_BUDGET,
     scipy_jac: str = "exact",
+    progress: Callable[[str], None] | None = None,
 ) -> FitResult:
     """Fit ``model`` to ``measurement``.
 
-    loss: l2 | cosine_l2 | log | cbrt | relative. solver: lm | gauss_newton | dogleg | bfgs | scipy.
-    init: None (variable-projection grid search, see ``brdffit.fitting.init``), "defaults", a
-    params dict (missing parameters take their defaults) or a FitResult. multistart: polish this
-    many further grid starts and keep the best; None (default) polishes AUTO_RETRIES further
-    starts only when the first solve does not converge. Non-convergence is reported in ``.status``, never
-    raised; parameters are never NaN.
+    loss: l2 | cosine_l2 | log | cbrt | relative. solver: lm | optx_lm | gauss_newton | dogleg |
+    bfgs | scipy. init: None (the variable-projection grid, see ``brdffit.fitting.init``),
+    "defaults", a params dict (missing parameters take their defaults) or a FitResult.
+    multistart: further grid starts solved beside the best one (all in one vmapped solve; the
+    lowest loss wins); None (default) = ``default_starts(model) - 1``. rtol: relative tolerance
+    (see ``solve.BoundedLevenbergMarquardt``); atol: absolute floor on the loss, 0 = none.
+    progress: called with a short text at each phase (initialising, compiling, solving, solved).
+    Non-convergence is reported in ``.status``, never raised; parameters are never NaN.
     """
+    note = progress or _quiet
     loss = check_loss(loss)
     solver = check_solver(solver)
     if max_steps < 1:
         raise UsageError("max_steps must be at least 1")
+    if multistart is not None and int(multistart) < 0:
+        raise UsageError("multistart must be >= 0")
     prep = prepare(measurement, weights)
     m = resolve_model(model, prep.channels)
     data = prep.data
+    lo, hi, free = parameter_space(m)
+    anchor = _start_from("defaults" if init is None else init, m, lo, hi)
+    n_starts = 1 + (default_starts(m) - 1 if multistart is None else int(multistart))
+    if solver == "scipy":
+        n_starts = 1 if multistart is None else n_starts
 
     compile_s = run_s = init_s = 0.0
-    auto = multistart is None
-    extra = AUTO_RETRIES if auto else max(0, int(multistart))
     if init is None:
-        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + extra, budget=grid_budget)
+        note("initialising: grid of starts")
+        starts, _, c_s, r_s = _init.best_starts(m, loss, data, lo, hi, free, anchor, k=n_starts, note=note)
         compile_s += c_s
         run_s += r_s
         init_s = c_s + r_s
     else:
-        starts = _start_from(init, m)[None, :]
+        starts = anchor[None, :]
+    # Keep the compiled shape (K starts) independent of how many distinct grid points there were.
+    starts = np.concatenate([starts, np.repeat(starts[-1:], n_starts - len(starts), axis=0)])[:n_starts]
 
-    best = None
-    for v0 in starts:
-        if solver == "scipy":
+    note(f"solving: {solver}, {len(starts)} start{'s' if len(starts) > 1 else ''}")
+    if solver == "scipy":
+        best = None
+        for i, v0 in enumerate(starts):
             v, value, code, steps, c_s, r_s = solve_scipy(
-                m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps, jac=scipy_jac
+                m, loss, v0, data, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps, jac=scipy_jac
             )
-        elif solver == "lmb":
-            v, value, code, steps, c_s, r_s = solve_lmb(m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps)
-        else:
-            v, value, code, steps, c_s, r_s = _active_set_solve(
-                m, loss, solver, v0, data, rtol=rtol, atol=atol, max_steps=max_steps
-            )
+            compile_s += c_s
+            run_s += r_s
+            if best is None or value < best[1]:
+                best = (v, value, code, steps, i)
+        v, value, code, steps, i_best = best
+    else:
+        v, value, code, steps, i_best, c_s, r_s = solve_optx(
+            m, loss, solver, starts, data, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps, note=note
+        )
         compile_s += c_s
         run_s += r_s
-        # Prefer a converged solve; among equals, the lower loss.
-        if best is None or (code == 0, -value) > (best[2] == 0, -best[1]):
-            best = (v, value, code, steps, v0)
-        if auto and code == 0:
-            break
-    v, value, code, steps, v0 = best
+    v0 = starts[i_best]
+    note(f"solved: {steps} steps, loss {value:.6g}, {STATUS_TEXT[code]}")
+    return _result(m, loss, solver, measurement.name, prep, v, value, code, steps, v0, lo, hi, free,
+                   seconds={"compile": compile_s, "run": run_s, "init": init_s},
+                   options={"max_steps": max_steps, "rtol": rtol, "atol": atol,
+                            "multistart": None if multistart is None else int(multistart),
+                            "starts": int(len(starts)), "init": "grid" if init is None else "given"})
 
+
+def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free, *, seconds, options,
+            metrics=None, jtj=None) -> FitResult:
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
-    metrics = evaluate(m, params, data)
-    stderr = standard_errors(m, loss, params, data, value, prep.n_used * prep.channels)
+    if metrics is None or jtj is None:
+        # Through the disk cache, like the solve (a second process traces nothing).
+        args = (jnp.asarray(v, dtype=jnp.float64), prep.data)
+        metrics_fn, _ = compiled(("metrics", m), lambda: loss_values(m), *args)
+        jtj_fn, _ = compiled(("jtj", m, loss), lambda: normal_matrix_fn(m, loss), *args)
+        metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
+        jtj = np.asarray(jtj_fn(*args))
+    stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:
         status = "converged (scipy least_squares)"
@@ -257,14 +231,13 @@ def fit(
         steps=int(steps),
         converged=code == 0,
         status=status,
-        seconds={"compile": compile_s, "run": run_s, "init": init_s},
+        seconds=seconds,
         solver=solver,
-        data_name=measurement.name,
+        data_name=name,
         n_used=prep.n_used,
         n_excluded=prep.n_excluded,
         excluded=prep.excluded,
         stderr=stderr,
         start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
-        options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "multistart": None if multistart is None else int(multistart),
-                 "init": "grid" if init is None else "given"},
+        options=options,
     )

@@ -1,26 +1,17 @@
 """`brdffit.fit_batch`: many independent fits of one model (BTF texels, many materials).
 
-All measurements must have the same number of samples and channels. The initialisation grid and
-the solve are vmapped over the batch and the batch axis is sharded over every device JAX sees.
+All measurements must have the same number of samples and channels. The same two compiled steps
+as ``fit`` (the variable-projection grid, then the vmapped solve of the best starts, see
+``solve.solve_starts``), vmapped once more over the batch, in chunks of ``chunk`` fits, the batch
+axis sharded over every device JAX sees (when the chunk divides evenly).
 
-A vmapped optimistix solve runs every lane until the slowest lane stops (converged lanes idle but
-still cost a step). Mitigations used here: (1) lanes are *chunked* (``chunk`` fits per compiled
-call), so one hard fit holds back only its chunk; (2) lanes are *sorted* by their start loss
-before chunking, so fits of similar difficulty share a chunk. Each fit gets the same active-set
-treatment as ``fit`` (parameters on a bound with an outward gradient are held there), in two
-rounds. Returns one FitResult per input, in input order; ``seconds`` of each result are the
-chunk's times divided by its number of lanes.
-
-The default solver is ``lmb`` (brdffit's projected Levenberg-Marquardt, which handles bounds by
-an active set inside every iteration and converges in ~10-30 iterations, so idle lanes cost
-little). Measured with ``python benchmarks/bench_fit.py --batch 32`` (ggx, 32 synthetic UBO-81
-texels, 2 shared CPU cores, one JAX device): ``lmb`` batched 319-337 ms/fit, about the same
-as a loop of ``fit(solver="lmb")`` (311 ms/fit; the variable-projection grid dominates and one
-CPU device gains nothing from vmap), all 32 converged. With optimistix ``lm`` batching was
-*slower* than a loop of ``fit`` (2.7-5.4 s/fit against 0.8 s/fit: lanes' step counts differ by
-10x, max 226, median 25) and only 20/32 converged within the two fixed active-set rounds;
-chunks of 8 helped (85 s against 173 s for one chunk), sorting by start loss did not here.
-So ``lmb`` is the batch default; the optimistix path is kept for comparisons.
+Inside a chunk, ``lanes`` fits are vectorised together (``jax.lax.map`` with that batch size):
+a vmapped solve runs every lane until the slowest lane stops, and on CPU vmap gains nothing
+else. Measured (16 ggx UBO-81 texels, 2 shared cores): vmapping all 16 took 1.63 s for the solve
+and 0.78 s for the starts, one lane at a time 0.54 s and 0.06 s; so ``lanes=1`` by default (more
+lanes may pay on a GPU). Fits are sorted by their start loss (``sort``) so that lanes of similar
+difficulty share a vector. Returns one FitResult per input, in input order; ``seconds`` of each
+result are its chunk's times divided by its fits.
 """
 
 from __future__ import annotations
@@ -36,47 +27,46 @@ import numpy as np
 from ..errors import UsageError
 from ..measurement import Measurement
 from . import init as _init
-from .api import _jacobian_fn, standard_errors
+from .api import DEFAULT_LOSS, DEFAULT_SOLVER, _result, default_starts, normal_matrix_fn, parameter_space
 from .losses import check_loss
-from .problem import Data, evaluate, flat_residual, prepare, resolve_model
+from .problem import Data, loss_values, prepare, resolve_model
 from .result import FitResult
-from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, _lmb_core, _solve_core, check_solver
+from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, check_solver, compiled, solve_starts
+
+#: Fits per compiled call.
+DEFAULT_CHUNK = 256
 
 
 @functools.lru_cache(maxsize=None)
-def _batched_grid(model, loss):
-    run = _init.vp_grid_fn(model, loss)
+def _grid_batched(model, loss, k, lanes):
+    run = _init.vp_grid(model, loss)
 
-    def one(grid, data):
-        flats, values = run(grid, data)
-        i = jnp.argmin(values)
-        return flats[i], values[i]
+    def batched(grid, data, lo, hi, free, anchor):
+        def one(d):
+            flats, values = run(grid, d, lo, hi, free, anchor)
+            order = jnp.argsort(values)[:k]
+            return flats[order], values[order]
 
-    return jax.jit(jax.vmap(one, in_axes=(None, 0)))
+        return jax.lax.map(one, data, batch_size=lanes)
 
-
-@functools.lru_cache(maxsize=None)
-def _batched_solve(model, loss, solver, rtol, atol, max_steps):
-    return jax.jit(jax.vmap(_solve_core(model, loss, solver, rtol, atol, max_steps)))
+    return batched
 
 
 @functools.lru_cache(maxsize=None)
-def _batched_lmb(model, loss, rtol, atol, max_steps):
-    return jax.jit(jax.vmap(_lmb_core(model, loss, rtol, atol, max_steps)))
+def _solve_batched(model, loss, solver, rtol, atol, max_steps, lanes):
+    one = solve_starts(model, loss, solver, rtol, atol, max_steps)
+
+    def batched(starts, data, lo, hi, free):
+        return jax.lax.map(lambda x: one(x[0], x[1], lo, hi, free), (starts, data), batch_size=lanes)
+
+    return batched
 
 
 @functools.lru_cache(maxsize=None)
-def _batched_outward(model, loss):
-    jac = jax.jacfwd(flat_residual(model, loss))
-    fn = flat_residual(model, loss)
-    lo, hi = (jnp.asarray(b) for b in model.bounds())
-
-    def one(v, data):
-        g = jac(v, data).T @ fn(v, data)
-        tol = 1e-9 * (hi - lo)
-        return ((v <= lo + tol) & (g > 0)) | ((v >= hi - tol) & (g < 0))
-
-    return jax.jit(jax.vmap(one))
+def _post(model, loss):
+    values = loss_values(model)
+    jtj = normal_matrix_fn(model, loss)
+    return lambda v, data: jax.lax.map(lambda x: (values(*x), jtj(*x)), (v, data))
 
 
 def _shard(tree):
@@ -85,10 +75,10 @@ def _shard(tree):
         return tree
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    mesh = Mesh(np.asarray(devices), ("b",))
     n = jax.tree_util.tree_leaves(tree)[0].shape[0]
     if n % len(devices):
         return tree
+    mesh = Mesh(np.asarray(devices), ("b",))
     return jax.device_put(tree, NamedSharding(mesh, PartitionSpec("b")))
 
 
@@ -96,20 +86,27 @@ def fit_batch(
     measurements: Sequence[Measurement],
     model,
     *,
-    loss: str = "log",
-    solver: str = "lmb",
+    loss: str = DEFAULT_LOSS,
+    solver: str = DEFAULT_SOLVER,
     max_steps: int = DEFAULT_MAX_STEPS,
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
-    chunk: int = 64,
+    chunk: int = DEFAULT_CHUNK,
     sort: bool = True,
-    grid_budget: int = _init.GRID_BUDGET,
+    multistart: int | None = None,
+    progress: bool = False,
+    lanes: int = 1,
 ) -> list[FitResult]:
-    """Fit ``model`` to each measurement independently; see the module docstring."""
+    """Fit ``model`` to each measurement independently; see the module docstring.
+
+    Same defaults as ``fit`` (loss, solver, starts, tolerances). ``progress=True`` shows a
+    progress bar (rich, on stderr) over the fits."""
     loss = check_loss(loss)
     solver = check_solver(solver)
     if solver == "scipy":
         raise UsageError("fit_batch: solver 'scipy' is not batched; use fit() per measurement")
+    if chunk < 1 or lanes < 1:
+        raise UsageError("fit_batch: chunk and lanes must be at least 1")
     measurements = list(measurements)
     if not measurements:
         return []
@@ -118,59 +115,97 @@ def fit_batch(
         raise UsageError(f"fit_batch: all measurements need the same samples and channels, got {sorted(shapes)}")
     preps = [prepare(m) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
-    data = Data(*(jnp.stack([p.data[i] for p in preps]) for i in range(6)))
-    grid = jnp.asarray(_init.grid_for(mdl, grid_budget))
+    lo, hi, free = parameter_space(mdl)
+    anchor = np.clip(np.asarray(mdl.flatten(mdl.defaults())), lo, hi)
+    k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
+    data = Data(*(np.stack([np.asarray(p.data[i]) for p in preps]) for i in range(6)))
     n = len(measurements)
+    chunk = min(chunk, n)
+    grid = jnp.asarray(_init.grid_for(mdl, lo, hi, free, anchor))
+    k = min(k, grid.shape[0])
+    space = (jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free), jnp.asarray(anchor))
 
-    t0 = time.perf_counter()
-    v0, l0 = jax.block_until_ready(_batched_grid(mdl, loss)(grid, _shard(data)))
-    init_s = time.perf_counter() - t0
-    order = np.argsort(np.asarray(l0)) if sort else np.arange(n)
+    bar = None
+    if progress:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    solve = None if solver == "lmb" else _batched_solve(mdl, loss, solver, rtol, atol, max_steps)
-    outward = _batched_outward(mdl, loss)
-    v_all = np.asarray(v0).copy()
-    val_all = np.zeros(n)
-    code_all = np.zeros(n, int)
-    steps_all = np.zeros(n, int)
-    secs = np.zeros(n)
+        bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                       transient=False)
+        bar.start()
+        task = bar.add_task(f"fit_batch {mdl.name}: starts", total=2 * n)
+    try:
+        # Starts, chunk by chunk (the grid's memory grows with the chunk).
+        starts = np.zeros((n, k, mdl.n_free))
+        start_loss = np.zeros(n)
+        init_s = compile_s = 0.0
+        for s in range(0, n, chunk):
+            idx = np.arange(s, min(s + chunk, n))
+            idx_p = np.concatenate([idx, np.repeat(idx[-1:], chunk - len(idx))])
+            d = _shard(_init.subset_batch(data, idx_p))
+            fn, c_s = compiled(("init_batch", mdl, loss, k, lanes), lambda: _grid_batched(mdl, loss, k, lanes), grid, d,
+                               *space)
+            t0 = time.perf_counter()
+            flats, values = jax.block_until_ready(fn(grid, d, *space))
+            init_s += time.perf_counter() - t0
+            compile_s += c_s
+            starts[idx] = np.asarray(flats)[: len(idx)]
+            start_loss[idx] = np.asarray(values)[: len(idx), 0]
+            if bar is not None:
+                bar.update(task, advance=len(idx))
+        if bar is not None:
+            bar.update(task, description=f"fit_batch {mdl.name}: solving")
+
+        order = np.argsort(start_loss) if sort else np.arange(n)
+        out = [None] * n
+        secs = np.zeros(n)
+        run_s_total = 0.0
+        for s in range(0, n, chunk):
+            idx = order[s : s + chunk]
+            idx_p = np.concatenate([idx, np.repeat(idx[-1:], chunk - len(idx))])  # one compiled shape
+            d = _shard(Data(*(jnp.asarray(a[idx_p]) for a in data)))
+            v0 = _shard(jnp.asarray(starts[idx_p]))
+            fn, c_s = compiled(("solve_batch", mdl, loss, solver, rtol, atol, max_steps, lanes),
+                               lambda: _solve_batched(mdl, loss, solver, rtol, atol, max_steps, lanes), v0, d,
+                               *space[:3])
+            compile_s += c_s
+            t0 = time.perf_counter()
+            res = jax.block_until_ready(fn(v0, d, *space[:3]))
+            dt = time.perf_counter() - t0
+            run_s_total += dt
+            v, value, code, steps, i_best = (np.asarray(a) for a in res[:5])
+            for j, i in enumerate(idx):
+                out[i] = (v[j], float(value[j]), int(code[j]), int(steps[j]), starts[i, int(i_best[j])])
+                secs[i] = dt / len(idx_p)
+            if bar is not None:
+                bar.update(task, advance=len(idx))
+    finally:
+        if bar is not None:
+            bar.stop()
+
+    # Metrics and J^T J (for the standard errors) of every fit, chunk by chunk in one call each.
+    post = _post(mdl, loss)
+    v_all = np.stack([o[0] for o in out])
+    metrics_all, jtj_all = [], []
     for s in range(0, n, chunk):
-        idx = order[s : s + chunk]
-        pad = chunk - len(idx) if n > chunk else 0  # keep one compiled shape for every chunk
-        idx_p = np.concatenate([idx, np.repeat(idx[-1:], pad)])
-        d = _shard(Data(*(a[idx_p] for a in data)))
-        v = jnp.asarray(v_all[idx_p])
-        t1 = time.perf_counter()
-        steps = np.zeros(len(idx_p), int)
-        if solver == "lmb":
-            v, value, code, st = _batched_lmb(mdl, loss, rtol, atol, max_steps)(v, d, jnp.ones(v.shape, bool))
-            steps += np.asarray(st)
-        for _round in range(0 if solver == "lmb" else 2):
-            held = outward(v, d)
-            x0 = jax.vmap(lambda vv: mdl.to_unconstrained(mdl.unflatten(vv)))(v)
-            x, value, code, st = solve(x0, d, ~held)
-            v = jax.vmap(lambda xx: mdl.flatten(mdl.from_unconstrained(xx)))(x)
-            steps += np.asarray(st)
-        jax.block_until_ready(v)
-        dt = time.perf_counter() - t1
-        k = len(idx)
-        v_all[idx] = np.asarray(v)[:k]
-        val_all[idx] = np.asarray(value)[:k]
-        code_all[idx] = np.asarray(code)[:k]
-        steps_all[idx] = steps[:k]
-        secs[idx] = dt / len(idx_p)
+        idx = np.arange(s, min(s + chunk, n))
+        idx_p = np.concatenate([idx, np.repeat(idx[-1:], chunk - len(idx))])
+        args = (jnp.asarray(v_all[idx_p]), Data(*(jnp.asarray(a[idx_p]) for a in data)))
+        fn, c_s = compiled(("post_batch", mdl, loss), lambda: post, *args)
+        compile_s += c_s
+        metrics, jtj = fn(*args)
+        metrics_all.append({k: np.asarray(x)[: len(idx)] for k, x in metrics.items()})
+        jtj_all.append(np.asarray(jtj)[: len(idx)])
+    jtj_all = np.concatenate(jtj_all)
+    metrics_all = {k: np.concatenate([m[k] for m in metrics_all]) for k in metrics_all[0]}
 
     results = []
     for i, (m, prep) in enumerate(zip(measurements, preps)):
-        params = {k: np.asarray(a) for k, a in mdl.unflatten(jnp.asarray(v_all[i])).items()}
-        results.append(FitResult(
-            model=mdl, params=params, loss=loss, loss_value=float(val_all[i]),
-            metrics=evaluate(mdl, params, prep.data), steps=int(steps_all[i]), converged=bool(code_all[i] == 0),
-            status=STATUS_TEXT[int(code_all[i])],
-            seconds={"compile": 0.0, "run": float(secs[i] + init_s / n), "init": init_s / n},
-            solver=solver, data_name=m.name, n_used=prep.n_used, n_excluded=prep.n_excluded, excluded=prep.excluded,
-            stderr=standard_errors(mdl, loss, params, prep.data, float(val_all[i]), prep.n_used * prep.channels),
-            start={k: np.asarray(a) for k, a in mdl.unflatten(jnp.asarray(np.asarray(v0)[i])).items()},
-            options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": chunk},
+        v, value, code, steps, v0 = out[i]
+        results.append(_result(
+            mdl, loss, solver, m.name, prep, v, value, code, steps, v0, lo, hi, free,
+            metrics={k: float(x[i]) for k, x in metrics_all.items()}, jtj=jtj_all[i],
+            seconds={"compile": compile_s / n, "run": float(secs[i] + init_s / n), "init": init_s / n},
+            options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": chunk,
+                     "starts": k, "multistart": multistart},
         ))
     return results

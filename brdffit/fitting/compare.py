@@ -18,6 +18,8 @@ from .problem import evaluate, prepare
 from .result import FitResult
 from .solve import check_solver
 
+from .._fit_defaults import COMPARE_SOLVERS as DEFAULT_SOLVERS
+
 COLUMNS = (
     "model", "solver", "loss", "n_params", "converged", "status", "steps", "compile_s", "run_s",
     *(f"loss_{name}" for name in LOSSES), "rmse", "log_rmse", "rel_rmse", "data_name",
@@ -128,7 +130,7 @@ def _row(r: FitResult, all_losses: dict[str, float]) -> dict[str, Any]:
 def compare(
     measurement: Measurement,
     models: Sequence[str] | None = None,
-    solvers: Sequence[str] = ("lm", "lmb", "dogleg", "bfgs", "scipy"),
+    solvers: Sequence[str] = DEFAULT_SOLVERS,
     losses: Sequence[str] = ("log",),
     *,
     progress: Callable[[str], None] | None = None,

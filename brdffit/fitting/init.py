@@ -1,16 +1,25 @@
-"""Robust default start: a coarse grid over the nonlinear parameters with the linear ones solved
-exactly at every grid point (variable projection), vectorised in JAX.
+"""The default start: a small grid over the nonlinear parameters with the linear ones solved at
+every grid point (variable projection), vectorised in JAX, on a subset of the samples.
 
-For every grid point of the nonlinear parameters (roughness and exponents on log axes, Fresnel
-f0, sigma, lobe shape on linear axes) the model is linear in the parameters declared
-``Param(linear=True)`` (kd, ks, rho): f = f_0 + sum_j x_j A_j. ``A_j`` comes from one model
-evaluation per linear *parameter* (all its channels at once: a per-channel parameter acts on its
-own channel only, which holds for every model of SPEC 4). The x_j are then the box-constrained
-(usually non-negative) least-squares solution of the loss linearised at the reference —
-weights (dg/df(f_ref))^2, so that for the ``log`` loss the bright specular peak does not dominate
-— solved by projected coordinate descent on the small normal equations. Each grid point is then
-scored by the *true* loss (exact, because f is linear in x), and the best point (or the best k
-distinct points for multistart) goes to the solver.
+The model is linear in the parameters declared ``Param(linear=True)`` (kd, ks, rho):
+f = f_0 + sum_j x_j A_j. ``A_j`` comes from one model evaluation per linear *parameter* (all its
+channels at once). The x_j are the box-constrained least-squares solution of the loss linearised
+at the reference (weights (dg/df(f_ref))^2, so that for the ``log`` loss the bright specular peak
+does not dominate): the unconstrained normal equations, clipped to the box, then a few sweeps of
+projected coordinate descent. Each grid point is scored by the true loss and the best K points
+start the solver (one vmapped solve, see ``solve.solve_starts``).
+
+Grid (structure-aware, small, so that the start costs less than the solve):
+
+* roughness and exponents get ``POINTS_ROUGHNESS`` values on a log axis (``POINTS_LOBES`` for
+  repeated lobes), other nonlinear
+  parameters (Fresnel f0, shape) ``POINTS_OTHER`` values;
+* lobes of one kind in a composite (``ggx1``, ``ggx2``) are started at *separated* roughnesses:
+  only strictly increasing combinations (ggx1.alpha < ggx2.alpha), so one lobe takes the sharp
+  peak and the other the broad sheen; their other nonlinear parameters share one grid value;
+* a parameter held by ``free = False`` has the single value ``anchor``;
+* where a bound is infinite, the grid uses the parameter's declared range (``Param.lower`` /
+  ``Param.upper`` when finite, else ``ROLE_RANGE`` of its role) intersected with the bounds.
 """
 
 from __future__ import annotations
@@ -18,6 +27,8 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import re
+import time
 
 import jax
 import jax.numpy as jnp
@@ -27,155 +38,207 @@ from ..models.base import Model, Param
 from . import losses as L
 from .problem import Data
 
-#: Total number of grid points to aim for (split evenly over the nonlinear parameters).
-GRID_BUDGET = 128
-#: Fraction of each axis kept away from the bounds (a roughness of exactly 1e-4 is a bad start).
+POINTS_ROUGHNESS = 10
+#: Roughness values shared by repeated lobes (their strictly increasing pairs: 45 for 10 values; 8 values missed the best basin of vch_golden_yellow).
+POINTS_LOBES = 10
+POINTS_OTHER = 3
+#: Fraction of each axis kept away from its ends (a roughness of exactly 1e-4 is a bad start).
 GRID_MARGIN = 0.04
+#: Grid range of a nonlinear parameter whose bound (and declared bound) is infinite, by role.
+ROLE_RANGE = {"roughness": (1e-3, 1.0), "exponent": (1.0, 1e4), "fresnel": (0.0, 1.0),
+              "shape": (0.0, 1.0), "anisotropy": (-1.0, 1.0), "albedo": (0.0, 1.0)}
+#: The grid scores at most this many samples (a fixed pseudo-random subset, the same for every
+#: data set of a shape); the solver then works on all of them. A start only has to land in the
+#: right basin.
+GRID_SAMPLES = 768
+#: Projected coordinate-descent sweeps after the clipped unconstrained solution.
+SWEEPS = 4
+
+_NAME = re.compile(r"^(?P<kind>[a-z_]+?)(?P<index>\d+)\.(?P<suffix>.+)$")
 
 
-def _axis_values(p: Param, k: int) -> np.ndarray:
-    a, b = p._axis_bounds()
-    t = np.linspace(a + GRID_MARGIN * (b - a), b - GRID_MARGIN * (b - a), k)
-    return np.exp(t) if p.scale == "log" else t
+def _axis(p: Param, lo: float, hi: float, k: int) -> np.ndarray:
+    a = lo if np.isfinite(lo) else (p.lower if np.isfinite(p.lower) else ROLE_RANGE.get(p.role, (0.0, 1.0))[0])
+    b = hi if np.isfinite(hi) else (p.upper if np.isfinite(p.upper) else ROLE_RANGE.get(p.role, (0.0, 1.0))[1])
+    if not np.isfinite(lo) and a > min(b, hi):
+        a = min(b, hi)
+    if not np.isfinite(hi) and b < a:
+        b = max(a * 100 if a > 0 else a + 1, lo)
+    if b <= a:
+        return np.asarray([a])
+    log = a > 0 and b / a >= 100.0
+    ta, tb = (math.log(a), math.log(b)) if log else (a, b)
+    t = np.linspace(ta + GRID_MARGIN * (tb - ta), tb - GRID_MARGIN * (tb - ta), k)
+    return np.exp(t) if log else t
 
 
-def grid_for(model: Model, budget: int = GRID_BUDGET) -> np.ndarray:
-    """Grid points (G, n_nonlinear_params): every nonlinear parameter shares one value over its
-    channels at the start."""
+def _layout(model: Model):
+    """Flat index of the first element of every parameter."""
+    out, i = {}, 0
+    for p in model.params:
+        out[p.name] = i
+        i += model.size(p)
+    return out
+
+
+def grid_for(model: Model, lo, hi, free, anchor) -> np.ndarray:
+    """Grid points (G, number of nonlinear parameters), one shared value over a parameter's channels."""
+    lo, hi, free, anchor = (np.asarray(a) for a in (lo, hi, free, anchor))
+    start = _layout(model)
     nonlin = [p for p in model.params if not p.linear]
     if not nonlin:
         return np.zeros((1, 0))
-    k = max(2, int(math.floor(budget ** (1.0 / len(nonlin)) + 1e-9)))
-    k = min(k, 24)
-    axes = [_axis_values(p, k) for p in nonlin]
-    return np.asarray(list(itertools.product(*axes)), dtype=np.float64)
-
-
-def _params_at(model: Model, point, linear_values: dict[str, jax.Array]):
-    params, i = {}, 0
-    for p in model.params:
-        n = model.size(p)
-        if p.linear:
-            params[p.name] = linear_values[p.name]
+    # Groups: parameters of repeated lobes of one kind with the same name (ggx1.alpha, ggx2.alpha).
+    groups: dict[tuple, list[int]] = {}
+    for j, p in enumerate(nonlin):
+        m = _NAME.match(p.name)
+        key = (m["kind"], m["suffix"]) if m else (p.name,)
+        groups.setdefault(key, []).append(j)
+    factors = []  # (column indices, rows of values)
+    for cols in groups.values():
+        axes = []
+        for j in cols:
+            p = nonlin[j]
+            i = start[p.name]
+            if not free[i]:
+                axes.append(np.asarray([anchor[i]]))
+            else:
+                rough = p.role in ("roughness", "exponent")
+                k = (POINTS_LOBES if len(cols) > 1 else POINTS_ROUGHNESS) if rough else POINTS_OTHER
+                axes.append(_axis(p, lo[i], hi[i], k))
+        if len(cols) == 1:
+            rows = axes[0][:, None]
+        elif nonlin[cols[0]].role in ("roughness", "exponent") and all(len(a) > 1 for a in axes):
+            # Separated lobes: strictly increasing combinations of one shared axis.
+            rows = np.asarray(list(itertools.combinations(axes[0], len(cols))))
+        elif all(len(a) == len(axes[0]) for a in axes):
+            rows = np.stack(axes, axis=1)  # tied: one value for every lobe
         else:
-            params[p.name] = jnp.full((n,), point[i])
-            i += 1
-    return params
+            rows = np.asarray(list(itertools.product(*axes)))
+        factors.append((cols, rows))
+    points = []
+    for combo in itertools.product(*(range(len(rows)) for _, rows in factors)):
+        pt = np.zeros(len(nonlin))
+        for (cols, rows), r in zip(factors, combo):
+            pt[cols] = rows[r]
+        points.append(pt)
+    return np.asarray(points, dtype=np.float64)
 
 
-def _box_lsq(gram, rhs, lo, hi, sweeps: int = 40):
-    """min 0.5 x'Gx - b'x on lo <= x <= hi, projected coordinate descent (G small, PSD)."""
+def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
+    """min 0.5 x'Gx - b'x on lo <= x <= hi (G small, PSD, unit diagonal): the unconstrained
+    solution clipped, then projected coordinate descent."""
     n = rhs.shape[0]
-    diag = jnp.maximum(jnp.diag(gram), 1e-300)
-    # Start from the unconstrained-diagonal solution, clipped.
-    x0 = jnp.clip(rhs / diag, lo, hi)
-
-    def sweep(_, x):
-        def coord(j, x):
+    ridge = 1e-9 * jnp.eye(n, dtype=gram.dtype)
+    x = jnp.linalg.solve(gram + ridge, rhs)
+    x = jnp.where(jnp.all(jnp.isfinite(x)), x, rhs)
+    x = jnp.clip(x, lo, hi)
+    for _ in range(sweeps):
+        for j in range(n):  # n is small and static: unrolled
             g = rhs[j] - gram[j] @ x + gram[j, j] * x[j]
-            return x.at[j].set(jnp.clip(g / diag[j], lo[j], hi[j]))
-
-        return jax.lax.fori_loop(0, n, coord, x)
-
-    return jax.lax.fori_loop(0, sweeps, sweep, x0)
+            x = x.at[j].set(jnp.clip(g / gram[j, j], lo[j], hi[j]))
+    return x
 
 
 @functools.lru_cache(maxsize=None)
-def vp_grid_fn(model: Model, loss: str):
-    """Compiled: (grid (G, m), data) -> (flat params (G, P), loss (G,)) for every grid point."""
+def vp_grid(model: Model, loss: str):
+    """run(grid (G, m), data, lo, hi, free, anchor) -> (flat params (G, P), loss (G,))."""
     lin = [p for p in model.params if p.linear]
+    nonlin = [p for p in model.params if not p.linear]
     C = model.channels
-    zeros = {p.name: jnp.zeros((model.size(p),)) for p in lin}
-    # Element j of the linear unknowns: (param index, channel or -1 for a shared parameter).
+    start = _layout(model)
+    # Element j of the linear unknowns: (linear param index, channel or -1 if shared, flat index).
     elements = []
     for i, p in enumerate(lin):
         if model.size(p) == 1:
-            elements.append((i, -1))
+            elements.append((i, -1, start[p.name]))
         else:
-            elements.extend((i, c) for c in range(model.size(p)))
-    lo = jnp.asarray([lin[i].lower for i, _ in elements], dtype=jnp.float64)
-    hi = jnp.asarray([lin[i].upper for i, _ in elements], dtype=jnp.float64)
+            elements.extend((i, c, start[p.name] + c) for c in range(model.size(p)))
+    el_flat = np.asarray([e[2] for e in elements], dtype=int)
+    nl_flat = [(start[p.name], model.size(p)) for p in nonlin]
 
-    def one(point, data: Data):
+    def flat_of(point, x):
+        v = jnp.zeros((model.n_free,), dtype=point.dtype if nonlin else x.dtype)
+        for (i, n), val in zip(nl_flat, point):
+            v = v.at[i : i + n].set(val)
+        if len(el_flat):
+            v = v.at[el_flat].set(x)
+        return v
+
+    def one(point, data: Data, lo, hi, free, anchor):
         wi, wo, ref, sqrt_w, cos_i, floor = data
-        f0 = model.eval(_params_at(model, point, zeros), wi, wo)
+        zero = jnp.zeros((len(el_flat),), dtype=ref.dtype)
+        f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
         if not lin:
-            x = jnp.zeros((0,))
-            f = f0
+            x, f = zero, f0
         else:
-            groups = []
-            for p in lin:
-                vals = dict(zeros)
-                vals[p.name] = jnp.ones((model.size(p),))
-                groups.append(model.eval(_params_at(model, point, vals), wi, wo) - f0)
             cols = []
-            for i, c in elements:
-                g = groups[i]
-                cols.append(g if c < 0 else g * (jnp.arange(C) == c))
+            for i, p in enumerate(lin):
+                ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
+                ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
+                g = model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0
+                for e in elements:
+                    if e[0] == i:
+                        cols.append(g if e[1] < 0 else g * (jnp.arange(C) == e[1]))
             A = jnp.stack(cols, axis=-1)  # (N, C, L)
             u = sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)  # (N, C)
             Au = A * u[..., None]
             gram = jnp.einsum("ncl,nck->lk", Au, A)
             rhs = jnp.einsum("ncl,nc->l", Au, ref - f0)
-            # Scale to unit diagonal for a well-conditioned descent.
-            s = jnp.sqrt(jnp.maximum(jnp.diag(gram), 1e-300))
-            x = _box_lsq(gram / s[:, None] / s[None, :], rhs / s, lo * s, hi * s) / s
-            x = jnp.clip(x, lo, hi)
+            s = jnp.sqrt(jnp.maximum(jnp.diag(gram), jnp.finfo(ref.dtype).tiny))
+            elo = jnp.where(free[el_flat], lo[el_flat], anchor[el_flat])
+            ehi = jnp.where(free[el_flat], hi[el_flat], anchor[el_flat])
+            x = _box_lsq(gram / s[:, None] / s[None, :], rhs / s, elo * s, ehi * s) / s
+            x = jnp.clip(x, elo, ehi)
             f = f0 + jnp.einsum("ncl,l->nc", A, x)
         r = L.residual(loss, f, ref, cos_i, sqrt_w, floor)
         value = jnp.sum(r**2)
-        value = jnp.where(jnp.isfinite(value), value, jnp.inf)
-        # Assemble the flat parameter vector in model order.
-        linear_values, j = {}, 0
-        for p in lin:
-            n = model.size(p)
-            if n == 1:
-                linear_values[p.name] = x[j : j + 1]
-            else:
-                linear_values[p.name] = x[j : j + n]
-            j += n
-        flat = model.flatten(_params_at(model, point, linear_values)) if model.params else jnp.zeros((0,))
-        return flat, value
+        return flat_of(point, x), jnp.where(jnp.isfinite(value), value, jnp.inf)
 
-    def run(grid, data):
-        return jax.lax.map(lambda pt: one(pt, data), grid, batch_size=16)
+    def run(grid, data, lo, hi, free, anchor):
+        return jax.vmap(one, in_axes=(0, None, None, None, None, None))(grid, data, lo, hi, free, anchor)
 
-    return jax.jit(run)
+    return run
 
 
-_COMPILED: dict = {}
-
-#: The grid scores at most this many samples (a fixed pseudo-random subset, the same for every
-#: data set of a shape); the solver then polishes on all of them. A start only has to land in
-#: the right basin, and the grid is the larger part of a fit's run time.
-GRID_SAMPLES = 2048
-
-
-def _subset(data: Data) -> Data:
-    n = data[0].shape[0]
+def _subset_index(n: int) -> np.ndarray | None:
     if n <= GRID_SAMPLES:
-        return data
+        return None
     # Pseudo-random, not strided: a stride aligned with the 81-view rows of a UBO table would
     # keep the same views for every light (and could miss every mirror configuration).
-    idx = np.sort(np.random.default_rng(0).choice(n, GRID_SAMPLES, replace=False))
+    return np.sort(np.random.default_rng(0).choice(n, GRID_SAMPLES, replace=False))
+
+
+def subset(data: Data) -> Data:
+    n = data[0].shape[0]
+    idx = _subset_index(n)
+    if idx is None:
+        return data
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
 
 
-def best_starts(model: Model, loss: str, data: Data, k: int = 1, budget: int = GRID_BUDGET):
-    """The k best grid starts: flat params (k, P), their losses (k,), compile s, run s."""
-    import time
+def subset_batch(data: Data, rows) -> Data:
+    """The grid's samples of the fits ``rows`` of a batch (arrays (B, N, ...) and floor (B, C))."""
+    n = data[0].shape[1]
+    idx = _subset_index(n)
+    out = []
+    for a in data:
+        a = np.asarray(a)[rows]
+        if idx is not None and a.ndim >= 3 and a.shape[1] == n:
+            a = a[:, idx]
+        out.append(jnp.asarray(a))
+    return Data(*out)
 
-    grid = jnp.asarray(grid_for(model, budget))
-    data = _subset(data)
-    key = (model, loss, grid.shape, tuple((a.shape, str(a.dtype)) for a in data))
-    compiled, compile_s = _COMPILED.get(key), 0.0
-    if compiled is None:
-        t0 = time.perf_counter()
-        compiled = vp_grid_fn(model, loss).lower(grid, data).compile()
-        compile_s = time.perf_counter() - t0
-        _COMPILED[key] = compiled
+
+def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: int = 1, note=None):
+    """The k best grid starts: flat params (k, P), their grid losses (k,), compile s, run s."""
+    from .solve import compiled
+
+    grid = jnp.asarray(grid_for(model, lo, hi, free, anchor))
+    args = (grid, subset(data), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool), jnp.asarray(anchor))
+    fn, compile_s = compiled(("init", model, loss), lambda: vp_grid(model, loss), *args, note=note)
     t0 = time.perf_counter()
-    flats, values = jax.block_until_ready(compiled(grid, data))
+    flats, values = jax.block_until_ready(fn(*args))
     order = np.argsort(np.asarray(values))[:k]
     run_s = time.perf_counter() - t0
     return np.asarray(flats)[order], np.asarray(values)[order], compile_s, run_s

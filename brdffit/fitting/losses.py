@@ -14,25 +14,34 @@ set). ``relative`` is the exception: it divides the difference by the reference,
 | `relative`  | (f - f_ref) / (|f_ref| + floor), floor = 1 % of mean |f_ref| per channel |      |
 
 Measured data can be slightly negative (RGB conversion of spectral data near a specular peak):
-every transform is defined there. ``log`` clamps 1 + f cos at 1e-12 (f cos < -1 is not a
-reflectance); ``cbrt`` is odd and smoothed within 1e-6 of zero, where the plain cube root has an
-infinite slope that would hand a Gauss-Newton solver an infinite Jacobian.
+every transform is defined there. ``log`` is ``log1p(f cos)`` with f cos clamped above -1 + 1e-12
+(f cos < -1 is not a reflectance); ``log1p`` keeps full relative precision for tiny values.
+``cbrt`` is odd and smoothed near zero, where the plain cube root has an infinite slope that would
+hand a Gauss-Newton solver an infinite Jacobian.
+
+Data scale. ``floor`` (per channel) is 1 % of the mean |f_ref|, and the cube root's smoothing
+width is CBRT_EPS times ``floor``: both scale with the data, so ``l2``, ``cosine_l2``, ``cbrt``
+and ``relative`` fits of a table multiplied by any factor (1e-12) are the original fit scaled
+(with the solver's relative tolerances, see ``solve``). ``log`` has a unit by its definition
+(1/sr: ln(1 + f cos) is ~ f cos for f cos << 1 and ~ ln(f cos) for f cos >> 1), so a scaled
+table is a different (more ``cosine_l2``-like) problem for it; it still converges in the same way.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 
-LOSSES = ("l2", "cosine_l2", "log", "cbrt", "relative")
+from .._fit_defaults import LOSSES  # noqa: F401 (re-exported)
 
-#: Smoothing of the cube root at zero (in units of f cos th_i, 1/sr).
-CBRT_EPS = 1e-6
+#: Smoothing width of the cube root at zero, relative to ``floor`` (1 % of the mean |f_ref|):
+#: 1e-6 of the mean value.
+CBRT_EPS = 1e-4
 
 
-def _cbrt(x):
+def _cbrt(x, eps):
     # Odd and smooth: x (x^2 + eps^2)^(-1/3) = sign(x) |x|^(1/3) for |x| >> eps, with the finite
     # slope eps^(-2/3) at 0 (the plain cube root's slope there is infinite).
-    return x * (x * x + CBRT_EPS**2) ** (-1.0 / 3.0)
+    return x * (x * x + eps**2) ** (-1.0 / 3.0)
 
 
 def check_loss(loss: str) -> str:
@@ -54,9 +63,9 @@ def transform(loss: str, f, cos_i, floor):
     if loss == "cosine_l2":
         return f * cos_i
     if loss == "log":
-        return jnp.log(jnp.maximum(1.0 + f * cos_i, 1e-12))
+        return jnp.log1p(jnp.maximum(f * cos_i, -1.0 + 1e-12))
     if loss == "cbrt":
-        return _cbrt(f * cos_i)
+        return _cbrt(f * cos_i, CBRT_EPS * floor)
     raise ValueError(loss)
 
 

@@ -89,7 +89,8 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     sqrt_w = np.sqrt(w / (w.sum() * c))[:, None]
     cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
     mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w.sum()
-    floor = 0.01 * mean_abs + 1e-12
+    # Relative to the data (see losses: a table scaled by 1e-12 fits as the original).
+    floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
     reasons = {k: v for k, v in exclusion_reasons(m).items() if v}
     data = Data(*(jnp.asarray(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
     return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
@@ -106,16 +107,6 @@ def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Arr
 
 
 @functools.lru_cache(maxsize=None)
-def unconstrained_residual(model: Model, loss: str):
-    """r(x, data) with x on the solver's unconstrained axes (fold transform, see models.base)."""
-
-    def fn(x, data):
-        return residual_of_params(model, loss, model.from_unconstrained(x), data)
-
-    return fn
-
-
-@functools.lru_cache(maxsize=None)
 def flat_residual(model: Model, loss: str):
     """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
 
@@ -128,6 +119,12 @@ def flat_residual(model: Model, loss: str):
 @functools.lru_cache(maxsize=None)
 def loss_values_fn(model: Model):
     """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
+    return jax.jit(loss_values(model))
+
+
+@functools.lru_cache(maxsize=None)
+def loss_values(model: Model):
+    """flat params, data -> every loss's value and the metrics (jit-able)."""
 
     def fn(v, data):
         params = model.unflatten(v)
@@ -139,14 +136,14 @@ def loss_values_fn(model: Model):
         n = jnp.sum(used) * f.shape[1]
         d = (f - ref) * used
         out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-        ld = (jnp.log(jnp.maximum(1 + f * cos_i, 1e-12)) - jnp.log(jnp.maximum(1 + ref * cos_i, 1e-12))) * used
+        ld = (L.transform("log", f, cos_i, floor) - L.transform("log", ref, cos_i, floor)) * used
         out["log_rmse"] = jnp.sqrt(jnp.sum(ld**2) / n)
         out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
         out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
         out["max_abs_error"] = jnp.max(jnp.abs(d))
         return out
 
-    return jax.jit(fn)
+    return fn
 
 
 def evaluate(model: Model, params, data: Data) -> dict[str, float]:

@@ -1,37 +1,57 @@
-"""Solvers: optimistix (LM, Gauss-Newton, dogleg, BFGS) compiled once per problem shape, and
-scipy's ``least_squares`` (TRF) as the reference baseline.
+"""Solvers (SPEC 5).
 
-Compiled solves are cached per (model, loss, solver, tolerances, max_steps, argument shapes): the
-measurement arrays are arguments, so a second data set of the same shape costs no compile.
-Every solve runs with ``throw=False`` and returns a status; its result is never NaN: if the final
-iterate is non-finite, or worse than the start, the start is returned (it is always finite) and
-the status says so.
+``lm`` (the default) is :class:`BoundedLevenbergMarquardt`, brdffit's projected Levenberg-Marquardt
+written as an optimistix least-squares solver and run by ``optx.least_squares(..., throw=False)``:
+bounds are handled inside every iteration (the step is projected onto the box, and parameters on a
+bound whose gradient points out of it are held for that iteration: an active set recomputed at
+every step), so a fit is one compiled call with no Python rounds around it, and it vmaps (several
+starts of one fit, the texels of a BTF).
+
+The bounds ``lower``/``upper`` (may be -inf/+inf) and the mask ``free`` (False: held at the start
+value) are *runtime* arrays (optimistix ``options``), so one compiled solver serves any bounds.
+
+optimistix's stock solvers stay selectable (``optx_lm``, ``gauss_newton``, ``dogleg``, ``bfgs``);
+they see an unconstrained variable, mapped onto the box element by element by :func:`to_box`.
+``scipy`` (``scipy.optimize.least_squares``, TRF) is the reference baseline.
+
+Tolerances are relative, so that a table multiplied by 1e-12 converges exactly as the original
+(see :class:`BoundedLevenbergMarquardt`); ``atol`` is an optional absolute floor on the loss
+(0 by default). Every solve returns a status code (``STATUS_TEXT``); its result is never NaN.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
+from collections.abc import Callable
+from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 import lineax as lx
+import numpy as np
 import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
 
+from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
 from ..errors import UsageError
 from ..models.base import Model
-from .problem import Data, flat_residual, unconstrained_residual
+from .cache import cache_enabled, exported
+from . import losses as L
+from .problem import Data, flat_residual
 
-SOLVERS = ("lm", "gauss_newton", "dogleg", "bfgs", "lmb", "scipy")
+#: Solvers that run compiled (and vmap): everything but scipy.
+COMPILED_SOLVERS = SOLVERS[:-1]
 _ALIASES = {"levenberg_marquardt": "lm", "gn": "gauss_newton", "gaussnewton": "gauss_newton", "trf": "scipy"}
 
-DEFAULT_RTOL = 1e-7
-DEFAULT_ATOL = 1e-10
-DEFAULT_MAX_STEPS = 200
 
-# optimistix result codes -> short status text.
-STATUS_OK = "converged"
+STATUS_TEXT = {
+    0: "converged",
+    1: "did not converge: maximum number of steps reached",
+    2: "did not converge: the solve diverged",
+    3: "did not converge: non-finite values during the solve",
+    4: "did not converge: the solver failed",
+}
 
 
 def check_solver(solver: str) -> str:
@@ -40,21 +60,6 @@ def check_solver(solver: str) -> str:
     if key not in SOLVERS:
         raise UsageError(f"unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
     return key
-
-
-def make_solver(name: str, rtol: float, atol: float):
-    # Parameters held at a bound (active set, see ``fit``) have zero Jacobian columns: the
-    # undamped Gauss-Newton step then needs a solver for rank-deficient systems (SVD).
-    if name == "lm":
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    if name == "gauss_newton":
-        return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    if name == "dogleg":
-        return optx.Dogleg(rtol=rtol, atol=atol, linear_solver=lx.SVD())
-    if name == "bfgs":
-        # A minimiser: optimistix minimises the sum of squares of the residual.
-        return optx.BFGS(rtol=rtol, atol=atol)
-    raise ValueError(name)
 
 
 def _status_code(result) -> jax.Array:
@@ -68,73 +73,263 @@ def _status_code(result) -> jax.Array:
     )
 
 
-STATUS_TEXT = {
-    0: STATUS_OK,
-    1: "did not converge: maximum number of steps reached",
-    2: "did not converge: the solve diverged",
-    3: "did not converge: non-finite values during the solve",
-    4: "did not converge: the solver failed",
-}
+# -- brdffit's bounded Levenberg-Marquardt as an optimistix solver ------------------------------
+class _LMState(eqx.Module):
+    # The normal equations at the current point, not the Jacobian: a small loop carry (the
+    # (M, P) Jacobian would be copied through the loop at every step).
+    c: Float[Array, ""]
+    g: Float[Array, " P"]
+    H: Float[Array, "P P"]
+    lam: Float[Array, ""]
+    nu: Float[Array, ""]
+    done: Bool[Array, ""]
+    result: optx.RESULTS
 
 
-#: Column scale the solver sees: each Jacobian column has this norm at the start (see _solve_core).
+def _normal_equations(fn, y, args):
+    """Loss r.r, gradient J^T r and Gauss-Newton matrix J^T J at y, with the Jacobian by forward
+    mode (measured: jacfwd with the residual as aux is 3x faster than jax.linearize + a vmap of
+    its JVPs on ggx/UBO-81)."""
+    def f(u):
+        r = fn(u, args)[0]
+        return r, r
+
+    J, r = jax.jacfwd(f, has_aux=True)(y)
+    return r @ r, J.T @ r, J.T @ J
+
+
+#: Largest factor by which a parameter with a positive lower bound changes in one step.
+STEP_FACTOR = 4.0
+
+
+class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
+    """Projected Levenberg-Marquardt with an active set per iteration, for a flat parameter vector.
+
+    options: ``lower``, ``upper`` (P,) bounds (may be infinite), ``free`` (P,) bool (False: held at
+    the start value). The start must lie in the box.
+
+    One iteration: with r and J the residual and Jacobian at the current point (forward mode),
+    g = J^T r, H = J^T J. Held: parameters not free, and those on a bound whose gradient points
+    out of the box. The free ones solve (H + lam diag H) d = -g (Marquardt's scaling, so lam is
+    unitless; Cholesky on the Jacobi-scaled system), the trial point is v + d clipped to the box;
+    it is accepted when the loss decreases, and lam follows Nielsen's update (gain ratio of actual
+    to predicted decrease).
+
+    Convergence (all relative, so invariant under scaling the data or a parameter's units):
+    the actual and the predicted relative decrease of the loss are both <= rtol (MINPACK's ftol
+    test); or first-order optimality: for every free parameter, the cosine between r and J_i is
+    <= rtol; or an exact fit: a loss <= options["loss_floor"] (``solve_one`` passes 1e-26 x the
+    loss of the zero model, i.e. residuals at roundoff level relative to the data), or <= atol^2; or no damping (lam up to 1e16) finds a decrease
+    (a minimum to machine precision). Otherwise the solve ends after max_steps with
+    ``nonlinear_max_steps_reached``.
+    """
+
+    rtol: float
+    atol: float = 0.0
+    norm: Callable = optx.max_norm
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        c, g, H = _normal_equations(fn, y, args)
+        dtype = y.dtype
+        return _LMState(c=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
+                        done=jnp.asarray(False), result=optx.RESULTS.successful)
+
+    def step(self, fn, y, args, options, state: _LMState, tags):
+        lo, hi, free = options["lower"], options["upper"], options["free"]
+        c, g, H, lam, nu = state.c, state.g, state.H, state.lam, state.nu
+        eye = jnp.eye(y.shape[0], dtype=y.dtype)
+        held = (~free) | ((y <= lo) & (g > 0)) | ((y >= hi) & (g < 0))
+        gf = jnp.where(held, 0.0, g)
+        # Jacobi scaling (columns to unit norm; a zero column keeps scale 1): Marquardt's damping
+        # lam diag(H) becomes lam I, and the solve does not depend on the parameters' units (no
+        # floor relative to the largest column: kd and alpha columns of a table scaled by 1e-12
+        # differ by 1e12).
+        D = jnp.sqrt(jnp.diag(H))
+        D = jnp.where((D > 0) & jnp.isfinite(D), D, 1.0)
+        Hs = H / D[:, None] / D[None, :]
+        mask2 = (~held)[:, None] & (~held)[None, :]
+        A = jnp.where(mask2, Hs + lam * eye, eye)  # held: identity rows, zero gradient
+        L = jnp.linalg.cholesky(A)
+        d = -jax.scipy.linalg.cho_solve((L, True), gf / D) / D
+        d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)
+        # Parameters with a positive lower bound (roughness, exponents) move by at most a factor
+        # STEP_FACTOR per step (a trust region on their log axis, scale-free): the roughness of a
+        # lobe narrower than the sample spacing has a ~0 column, and its Gauss-Newton step
+        # (1e16 on torrance_sparrow) would throw it to the far bound, so that every trial was
+        # rejected and the damping ran out ("converged" at a poor point).
+        pos = lo > 0
+        lo_t = jnp.maximum(lo, jnp.where(pos, y / STEP_FACTOR, -jnp.inf))
+        hi_t = jnp.minimum(hi, jnp.where(pos, y * STEP_FACTOR, jnp.inf))
+        y_new = jnp.clip(y + d, lo_t, hi_t)
+        step = y_new - y
+        # The trial point's loss and normal equations together (one fused evaluation; a rejected
+        # trial wastes the Jacobian, but near convergence nearly every trial is accepted, and
+        # under vmap a branch would evaluate both sides anyway).
+        c_new, g_new, H_new = _normal_equations(fn, y_new, args)
+        pred = -(2.0 * gf @ step + step @ (H @ step))
+        rho = (c - c_new) / jnp.maximum(pred, jnp.finfo(y.dtype).tiny)
+        accept = jnp.isfinite(c_new) & (c_new < c) & jnp.all(jnp.isfinite(H_new))
+        lam_next = jnp.where(accept, lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu)
+        nu_next = jnp.where(accept, 2.0, nu * 2.0)
+        y_next = jnp.where(accept, y_new, y)
+        c_next = jnp.where(accept, c_new, c)
+        g_next = jnp.where(accept, g_new, g)
+        H_next = jnp.where(accept, H_new, H)
+
+        # MINPACK's test: both the actual and the predicted relative decrease are small.
+        small_f = accept & ((c - c_new) <= self.rtol * c) & (pred <= self.rtol * c) & (rho <= 2.0)
+        col = jnp.sqrt(jnp.diag(H_next))
+        col = jnp.where(col > 0, col, 1.0)  # a zero column has a zero gradient
+        held_next = (~free) | ((y_next <= lo) & (g_next > 0)) | ((y_next >= hi) & (g_next < 0))
+        cosine = jnp.where(held_next, 0.0, jnp.abs(g_next) / (col * jnp.sqrt(c_next)))
+        small_g = jnp.max(cosine) <= self.rtol
+        exact = c_next <= jnp.maximum(self.atol**2, options.get("loss_floor", 0.0))
+        stuck = (~accept) & (lam_next > 1e16)
+        done = small_f | small_g | exact | stuck
+        result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
+        new_state = _LMState(c=c_next, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result)
+        return y_next, new_state, None
+
+    def terminate(self, fn, y, args, options, state: _LMState, tags):
+        return state.done, state.result
+
+    def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
+        return y, aux, {"loss": state.c}
+
+
+# -- optimistix's stock solvers on an unconstrained variable ------------------------------------
+def _log_axis(lo):
+    """Parameters with a positive lower bound (roughness, exponents) move on a log axis."""
+    return lo > 0
+
+
+def to_box(x, lo, hi):
+    """Unconstrained x -> a value in [lo, hi], element by element, slope +-1 on the solver's axis:
+    a fold (triangle wave) for a finite box, a reflection lo + |x - lo| (or hi - |hi - x|) for a
+    half-infinite one, the identity when unbounded. Positive lower bounds use a log axis."""
+    log = _log_axis(lo)
+    a = jnp.where(log, jnp.log(jnp.where(log, lo, 1.0)), lo)
+    b = jnp.where(log, jnp.log(jnp.where(log, hi, 1.0)), hi)
+    fa, fb = jnp.isfinite(a), jnp.isfinite(b)
+    a0 = jnp.where(fa, a, 0.0)
+    b0 = jnp.where(fb, b, 0.0)
+    width = jnp.where(fa & fb, b0 - a0, 1.0)
+    m = jnp.mod(x - a0, 2 * width)
+    folded = a0 + jnp.where(m <= width, m, 2 * width - m)
+    folded = jnp.where(width > 0, folded, a0)
+    y = jnp.where(fa & fb, folded, jnp.where(fa, a0 + jnp.abs(x - a0), jnp.where(fb, b0 - jnp.abs(b0 - x), x)))
+    return jnp.where(log, jnp.exp(y), y)
+
+
+def from_box(v, lo, hi):
+    """Inverse of :func:`to_box` on the box."""
+    log = _log_axis(lo)
+    v = jnp.clip(v, lo, hi)
+    return jnp.where(log, jnp.log(jnp.where(log, v, 1.0)), v)
+
+
+def make_solver(name: str, rtol: float, atol: float):
+    """The optimistix solver object behind a solver name (not ``scipy``)."""
+    if name == "lm":
+        return BoundedLevenbergMarquardt(rtol=rtol, atol=atol)
+    # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
+    # for rank-deficient systems (SVD).
+    if name == "optx_lm":
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    if name == "gauss_newton":
+        return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+    if name == "dogleg":
+        return optx.Dogleg(rtol=rtol, atol=atol, linear_solver=lx.SVD())
+    if name == "bfgs":
+        return optx.BFGS(rtol=rtol, atol=atol)  # a minimiser of the sum of squares
+    raise ValueError(name)
+
+
+#: Column norm the stock solvers see at the start (Jacobi scaling, see ``_stock_run``).
 COLUMN_NORM = 30.0
 
 
-def _solve_core(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """The jit-able solve. The solver works on z = x * s with s = |J_j(x0)| / COLUMN_NORM.
+def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
+    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free) -> (v, loss, code, steps).
 
-    Why: optimistix's Levenberg-Marquardt damps with lambda * I and starts at lambda = 1, shrinking it
-    by 3.5x per accepted step; its dogleg starts with a unit trust radius and BFGS with an identity
-    Hessian. Our Jacobians have column norms of 1e-3..1e2 (log residuals, log-axis roughness), so
-    unscaled they spent 60-160 steps reaching the Gauss-Newton regime (measured on the RGL files).
-    Jacobi scaling makes lambda * I act like Marquardt's diag(J^T J) damping, and a column norm of 30
-    makes lambda = 1 a mild (1e-3 relative) damping, so the first steps are nearly Gauss-Newton.
+    The result is never NaN: when the final iterate is non-finite or worse than the start, the
+    start (finite, in the box) is returned with a failure status.
     """
-    base = unconstrained_residual(model, loss)
-    solver = make_solver(solver_name, rtol, atol)
+    fn = flat_residual(model, loss)
 
-    def fn_x(x, data, free, anchor):
-        # Held parameters (free = False) stay at their anchor value; their columns are zero.
-        return base(jnp.where(free, x, anchor), data)
+    def loss_floor(data):
+        """Loss of an exact fit, relative to the data: (1e-13)^2 x the loss of f = 0."""
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor)
+        return 1e-26 * jnp.sum(r0 * r0)
 
-    def fn(z, args):
-        data, free, anchor, scale = args
-        return fn_x(z / scale, data, free, anchor)
+    def loss_of(v, data):
+        r = fn(v, data)
+        return r @ r
 
-    def loss_of(x, data, free, anchor):
-        r = fn_x(x, data, free, anchor)
-        return jnp.sum(r**2)
-
-    def run(x0, data, free):
-        jac = jax.jacfwd(fn_x)(x0, data, free, x0)
-        norms = jnp.sqrt(jnp.sum(jac**2, axis=0))
-        norms = jnp.where(jnp.isfinite(norms), norms, 0.0)
-        # A column that is ~0 at the start (a lobe with rho = 0) must not get a huge z-step.
-        norms = jnp.maximum(norms, 1e-3 * jnp.max(norms)) / COLUMN_NORM
-        scale = jnp.where(norms > 0, norms, 1.0)
-        args = (data, free, x0, scale)
-        sol = optx.least_squares(fn, solver, x0 * scale, args=args, max_steps=max_steps, throw=False)
-        x = jnp.where(free, sol.value / scale, x0)
-        l0 = loss_of(x0, data, free, x0)
-        l1 = loss_of(x, data, free, x0)
-        ok = jnp.all(jnp.isfinite(x)) & jnp.isfinite(l1) & (l1 <= l0)
-        code = _status_code(sol.result)
-        # Fallback: the start (finite by construction) when the solve produced junk.
+    def finish(v0, v, code, steps, data):
+        l0 = loss_of(v0, data)
+        l1 = loss_of(v, data)
+        # Worse than the start (beyond roundoff): a stock solver wandered off.
+        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
         code = jnp.where(ok | (code != 0), code, 2)
         code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
-        x = jnp.where(ok, x, x0)
-        value = jnp.where(ok, l1, l0)
-        steps = sol.stats["num_steps"]
-        return x, value, code, steps
+        return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), code, steps
+
+    solver = make_solver(solver_name, rtol, atol)
+    if solver_name == "lm":
+
+        def run(v0, data, lo, hi, free):
+            v0 = jnp.clip(v0, lo, hi)
+            sol = optx.least_squares(lambda v, d: fn(v, d), solver, v0, args=data,
+                                     options={"lower": lo, "upper": hi, "free": free,
+                                              "loss_floor": loss_floor(data)},
+                                     max_steps=max_steps, throw=False)
+            return finish(v0, sol.value, _status_code(sol.result), sol.stats["num_steps"], data)
+
+        return run
+
+    def run(v0, data, lo, hi, free):
+        """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
+
+        Why: optimistix's Levenberg-Marquardt damps with lambda * I starting at 1, its dogleg
+        starts with a unit trust radius and BFGS with an identity Hessian; our Jacobian columns
+        span 1e-3..1e2, and unscaled they spent 60-160 steps reaching the Gauss-Newton regime.
+        Jacobi scaling makes lambda * I act like Marquardt's damping."""
+        v0 = jnp.clip(v0, lo, hi)
+        x0 = from_box(v0, lo, hi)
+
+        def fn_x(x, data):
+            # Held parameters stay at their start value; their columns are zero.
+            return fn(to_box(jnp.where(free, x, x0), lo, hi), data)
+
+        jac = jax.jacfwd(fn_x)(x0, data)
+        norms = jnp.sqrt(jnp.sum(jac**2, axis=0))
+        norms = jnp.where(jnp.isfinite(norms), norms, 0.0)
+        norms = jnp.maximum(norms, 1e-3 * jnp.max(norms)) / COLUMN_NORM
+        scale = jnp.where(norms > 0, norms, 1.0)
+        sol = optx.least_squares(lambda z, d: fn_x(z / scale, d), solver, x0 * scale, args=data,
+                                 max_steps=max_steps, throw=False)
+        v = to_box(jnp.where(free, sol.value / scale, x0), lo, hi)
+        return finish(v0, v, _status_code(sol.result), sol.stats["num_steps"], data)
 
     return run
 
 
-@dataclasses.dataclass
-class _Compiled:
-    fn: object
-    compile_s: float
+def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
+    """run(starts (K, P), data, lo, hi, free) -> the best of K solves (one vmapped solve):
+    (v, loss, code, steps, index of the start, per-start losses (K,), per-start codes (K,)).
+
+    The best is the lowest loss; the fit is converged when that solve's own test passed."""
+    one = jax.vmap(solve_one(model, loss, solver_name, rtol, atol, max_steps), in_axes=(0, None, None, None, None))
+
+    def run(starts, data, lo, hi, free):
+        v, value, code, steps = one(starts, data, lo, hi, free)
+        key = jnp.where(jnp.isfinite(value), value, jnp.inf)
+        i = jnp.argmin(key)
+        return v[i], value[i], code[i], steps[i], i, value, code
+
+    return run
 
 
 _CACHE: dict = {}
@@ -144,175 +339,74 @@ def _shape_key(tree):
     return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
 
 
-def compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free, batched: bool = False):
-    """The compiled solve for these shapes, and its compile time (0 when cached)."""
-    key = (model, loss, solver_name, rtol, atol, max_steps, _shape_key((x0, data, free)), batched)
-    hit = _CACHE.get(key)
-    if hit is not None:
-        return hit.fn, 0.0
-    core = _solve_core(model, loss, solver_name, rtol, atol, max_steps)
-    fn = jax.vmap(core) if batched else core
-    t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(x0, data, free).compile()
-    dt = time.perf_counter() - t0
-    _CACHE[key] = _Compiled(compiled, dt)
-    return compiled, dt
+def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
+    """Compile ``build()`` for these argument shapes once per process and, through the disk cache
+    (``cache``), once per machine; returns (compiled function, compile seconds this call).
 
-
-def solve_optx(model, loss, solver_name, x0, data, free, *, rtol, atol, max_steps):
-    """Returns (x, loss value, status code, steps, compile s, run s); ``free`` (P,) bool marks
-    the parameters the solver may move (the others stay at x0)."""
-    free = jnp.asarray(free, dtype=bool)
-    fn, compile_s = compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free)
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(x0, data, free))
-    run_s = time.perf_counter() - t0
-    x, value, code, steps = (np.asarray(a) for a in out)
-    return x, float(value), int(code), int(steps), compile_s, run_s
-
-
-_SCIPY_CACHE: dict = {}
-
-
-def _scipy_fns(model, loss, v0, data):
-    key = (model, loss, _shape_key((v0, data)))
-    hit = _SCIPY_CACHE.get(key)
+    On disk: JAX's persistent cache keeps the compiled code, and ``cache.exported`` keeps the
+    traced program (``jax.export``), so that a second process skips tracing optimistix too."""
+    full = (key, _shape_key(example))
+    hit = _CACHE.get(full)
     if hit is not None:
         return hit, 0.0
-    fn = flat_residual(model, loss)
+    if note is not None:
+        note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
     t0 = time.perf_counter()
-    res = jax.jit(fn).lower(v0, data).compile()
-    jac = jax.jit(jax.jacfwd(fn)).lower(v0, data).compile()
+    fn = exported(key, build, example)
     dt = time.perf_counter() - t0
-    _SCIPY_CACHE[key] = (res, jac)
-    return (res, jac), dt
+    _CACHE[full] = fn
+    return fn, dt
 
 
-def solve_scipy(model, loss, v0, data, *, rtol, atol, max_steps, jac: str = "exact"):
-    """scipy.optimize.least_squares (TRF, bounded) on the flat parameter vector.
+def solve_optx(model, loss, solver_name, starts, data, lo, hi, free, *, rtol, atol, max_steps, note=None):
+    """Best of the K starts (K, P). Returns (v, loss, code, steps, start index, compile s, run s)."""
+    args = (jnp.asarray(starts), data, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool))
+    fn, compile_s = compiled(("solve", model, loss, solver_name, rtol, atol, max_steps),
+                             lambda: solve_starts(model, loss, solver_name, rtol, atol, max_steps), *args,
+                             note=note)
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    run_s = time.perf_counter() - t0
+    v, value, code, steps, i = (np.asarray(a) for a in out[:5])
+    return v, float(value), int(code), int(steps), int(i), compile_s, run_s
 
-    ``jac="exact"`` uses the JAX Jacobian; "2-point"/"3-point" scipy's finite differences.
-    Returns (v, loss value, status code, steps (function evaluations), compile s, run s).
+
+def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str = "exact"):
+    """scipy.optimize.least_squares (TRF, bounded) on the free parameters of the flat vector.
+
+    ``jac="exact"`` uses the JAX Jacobian (jit-compiled); "2-point"/"3-point" scipy's finite
+    differences. Returns (v, loss value, status code, steps (function evaluations), compile s, run s).
     """
     from scipy.optimize import least_squares
 
-    (res, jacf), compile_s = _scipy_fns(model, loss, jnp.asarray(v0), data)
-    lo, hi = model.bounds()
-    v0 = np.clip(np.asarray(v0, dtype=np.float64), lo, hi)
+    fn = flat_residual(model, loss)
+    example = (jnp.asarray(v0, dtype=jnp.float64), data)
+    res, c1 = compiled(("scipy_res", model, loss), lambda: fn, *example)
+    jacf, c2 = compiled(("scipy_jac", model, loss), lambda: jax.jacfwd(fn), *example)
+    lo, hi, free = np.asarray(lo, float), np.asarray(hi, float), np.asarray(free, bool)
+    v_full = np.clip(np.asarray(v0, dtype=np.float64), lo, hi)
 
-    def f(v):
-        return np.asarray(res(jnp.asarray(v), data))
+    def expand(u):
+        v = v_full.copy()
+        v[free] = u
+        return jnp.asarray(v)
 
-    def j(v):
-        return np.asarray(jacf(jnp.asarray(v), data))
+    def f(u):
+        return np.asarray(res(expand(u), data))
+
+    def j(u):
+        return np.asarray(jacf(expand(u), data))[:, free]
 
     t0 = time.perf_counter()
     sol = least_squares(
-        f, v0, jac=j if jac == "exact" else jac, bounds=(lo, hi), method="trf",
-        ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=max(atol, 1e-15), max_nfev=max_steps * 10,
+        f, v_full[free], jac=j if jac == "exact" else jac, bounds=(lo[free], hi[free]), method="trf",
+        # scipy's gtol is absolute (on the scaled gradient): left at its floor, ftol/xtol stop it.
+        ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=1e-15, max_nfev=max_steps * 10,
     )
     run_s = time.perf_counter() - t0
-    v = sol.x
+    v = np.asarray(expand(sol.x))
     value = float(np.sum(sol.fun**2))
     code = 0 if sol.status > 0 else (1 if sol.status == 0 else 4)
     if not (np.all(np.isfinite(v)) and np.isfinite(value)):
-        v, value, code = v0, float(np.sum(f(v0) ** 2)), 3
-    return v, value, code, int(sol.nfev), compile_s, run_s
-
-
-# -- brdffit's own bounded Levenberg-Marquardt ("lmb") -----------------------------------------
-def _lmb_core(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
-    """Projected Levenberg-Marquardt on the bounded parameter values (no fold transform).
-
-    Each iteration: one forward-mode Jacobian (``jax.linearize`` + vmap: P JVPs), the small P x P
-    normal equations with Marquardt's diagonal scaling (H + lam diag H) d = -g solved by Cholesky
-    over the *free* parameters (those on a bound whose gradient points out of the box are held:
-    an active set recomputed every iteration), the step clipped to the box, Nielsen's damping
-    update. Converged when the relative decrease of the loss and the relative step are both below
-    rtol (or the projected gradient is below atol).
-    """
-    fn = flat_residual(model, loss)
-    lo_np, hi_np = model.bounds()
-
-    def run(v0, data, free_mask):
-        lo = jnp.asarray(lo_np)
-        hi = jnp.asarray(hi_np)
-        P = v0.shape[0]
-        eye = jnp.eye(P, dtype=v0.dtype)
-
-        def lin(v):
-            r, f_jvp = jax.linearize(lambda u: fn(u, data), v)
-            J = jax.vmap(f_jvp, out_axes=1)(eye)
-            return r, J
-
-        def cost(v):
-            r = fn(v, data)
-            return jnp.sum(r * r)
-
-        r0, J0 = lin(v0)
-
-        def body(state):
-            v, r, J, lam, nu, k, done, code = state
-            c = jnp.sum(r * r)
-            g = J.T @ r
-            H = J.T @ J
-            held = (~free_mask) | ((v <= lo) & (g > 0)) | ((v >= hi) & (g < 0))
-            gf = jnp.where(held, 0.0, g)
-            dH = jnp.maximum(jnp.diag(H), 1e-30)
-            A = H + lam * jnp.diag(dH)
-            mask2 = (~held)[:, None] & (~held)[None, :]
-            # Held parameters: identity rows / columns, zero gradient -> zero step.
-            A = jnp.where(mask2, A, eye)
-            L = jnp.linalg.cholesky(A)
-            d = -jax.scipy.linalg.cho_solve((L, True), gf)
-            d = jnp.where(jnp.all(jnp.isfinite(d)), d, -gf / dH)
-            v_new = jnp.clip(v + d, lo, hi)
-            step = v_new - v
-            c_new = cost(v_new)
-            pred = -(2.0 * gf @ step + step @ (H @ step))
-            rho = (c - c_new) / jnp.maximum(pred, 1e-300)
-            accept = jnp.isfinite(c_new) & (c_new < c)
-            lam_acc = lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            lam = jnp.where(accept, lam_acc, lam * nu)
-            nu = jnp.where(accept, 2.0, nu * 2.0)
-            v_next = jnp.where(accept, v_new, v)
-            r_next, J_next = jax.lax.cond(accept, lin, lambda _: (r, J), v_next)
-            small_f = accept & ((c - c_new) <= rtol * c + atol**2)
-            small_x = jnp.max(jnp.abs(step) / (jnp.abs(v) + atol + (hi - lo) * 1e-6)) <= rtol * 10
-            pg = jnp.max(jnp.abs(jnp.where(held, 0.0, J_next.T @ r_next)))
-            conv = (small_f & small_x) | (pg <= atol) | (~accept & (lam > 1e16))
-            return v_next, r_next, J_next, lam, nu, k + 1, conv, jnp.where(conv, 0, code)
-
-        def cond(state):
-            return (~state[6]) & (state[5] < max_steps)
-
-        state = (v0, r0, J0, jnp.asarray(1e-3, v0.dtype), jnp.asarray(2.0, v0.dtype), 0, False, 1)
-        v, r, J, lam, nu, k, done, code = jax.lax.while_loop(cond, body, state)
-        l0 = cost(v0)
-        l1 = jnp.sum(r * r)
-        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1)
-        return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), jnp.where(ok, code, 3), k
-
-    return run
-
-
-_LMB_CACHE: dict = {}
-
-
-def solve_lmb(model, loss, v0, data, *, rtol, atol, max_steps):
-    """Returns (v, loss value, status code, steps, compile s, run s)."""
-    v0 = jnp.asarray(np.clip(np.asarray(v0, dtype=np.float64), *model.bounds()))
-    free = jnp.ones(v0.shape, bool)
-    key = (model, loss, rtol, atol, max_steps, _shape_key((v0, data)))
-    compiled = _LMB_CACHE.get(key)
-    compile_s = 0.0
-    if compiled is None:
-        t0 = time.perf_counter()
-        compiled = jax.jit(_lmb_core(model, loss, rtol, atol, max_steps)).lower(v0, data, free).compile()
-        compile_s = time.perf_counter() - t0
-        _LMB_CACHE[key] = compiled
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(compiled(v0, data, free))
-    run_s = time.perf_counter() - t0
-    v, value, code, steps = (np.asarray(a) for a in out)
-    return v, float(value), int(code), int(steps), compile_s, run_s
+        v, value, code = v_full, float(np.sum(f(v_full[free]) ** 2)), 3
+    return v, value, code, int(sol.nfev), c1 + c2, run_s

@@ -1,0 +1,20 @@
+"""The defaults of a fit, in one place (no heavy imports), shared by ``brdffit.fit``,
+``brdffit.fit_batch`` and ``brdffit fit`` / ``brdffit compare`` on the command line."""
+
+LOSSES = ("l2", "cosine_l2", "log", "cbrt", "relative")
+SOLVERS = ("lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy")
+DEFAULT_LOSS = "log"
+DEFAULT_SOLVER = "lm"
+DEFAULT_MAX_STEPS = 200
+#: Relative tolerance on the loss (see solve.BoundedLevenbergMarquardt). 1e-6, not smaller:
+#: a lobe narrower than the sample spacing (ks, alpha -> 0 with ks/alpha^2 fixed) lets the loss
+#: creep down by ~1e-7 per step for a hundred steps (lambert+ggx+ggx on cc_ibiza_sunset).
+DEFAULT_RTOL = 1e-6
+#: Absolute floor on the loss below which a fit stops; 0 = none (convergence must not depend on
+#: the data's scale).
+DEFAULT_ATOL = 0.0
+#: Starts of a composite with several lobes of one kind (``lambert+ggx+ggx``), solved at once
+#: (see fitting.api.default_starts for the measurement behind 1).
+COMPOSITE_STARTS = 1
+#: Solvers that ``brdffit compare`` runs by default.
+COMPARE_SOLVERS = ("lm", "optx_lm", "dogleg", "bfgs", "scipy")
