@@ -25,6 +25,7 @@ bench: $(STAMP)
 MUTATE ?= brdffit.models* brdffit.fitting* brdffit.io*
 MUTATION_JOBS ?= 2
 mutation: $(STAMP)
+	$(VENV)/bin/mutmut --version >/dev/null 2>&1 || $(VENV)/bin/python -m pip install "mutmut==3.8.1"
 	rm -rf mutants
 	BRDFFIT_DATA=/nonexistent $(VENV)/bin/mutmut run --max-children $(MUTATION_JOBS) $(foreach p,$(MUTATE),"$(p)") || true
 	$(VENV)/bin/mutmut results --all=True | $(VENV)/bin/python scripts/mutation_report.py $(foreach p,$(MUTATE),"$(p)")
