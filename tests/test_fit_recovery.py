@@ -59,8 +59,15 @@ RANGES: dict[str, dict[str, tuple]] = {
     "ashikhmin_shirley": {"rd": ALB, "rs": (0.05, 0.5), "nu": (5.0, 100.0, LOG), "nv": (5.0, 100.0, LOG)},
 }
 
-#: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run.
-KNOWN_FAILURES: dict[tuple[str, int], str] = {}
+#: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run
+#: (observed with the solver of commit 644b209; the solver is being rewritten, issue 8).
+KNOWN_FAILURES: dict[tuple[str, int], str] = {
+    ("phong_classic", 1): "wrong local minimum: ks of two channels driven to 0 (log loss 0.017, 100x the "
+                          "noise), stops at max_steps",
+    ("torrance_sparrow", 1): "stops at max_steps with ks of one channel at 0 (the other lobes compensate)",
+    ("torrance_sparrow", 3): "stops at max_steps with ks of one channel at 0 (log loss 6e-4)",
+    ("lafortune", 2): "reports converged with n = 100.0 (truth 36.6): n stays at the grid start's value",
+}
 
 
 def model_key(name: str) -> jax.Array:
@@ -115,6 +122,7 @@ def _cases():
             yield pytest.param(name, k, id=f"{name}-{k}", marks=marks)
 
 
+@pytest.mark.slow  # 44 fits of 6561 samples: ~5 min on 2 busy cores
 @pytest.mark.parametrize("name, k", list(_cases()))
 def test_recovery(name, k):
     model = models.get(name)
