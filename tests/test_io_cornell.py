@@ -126,3 +126,25 @@ def test_cornell_reader_colours(tmp_path):
     m = brdffit.load(p)
     np.testing.assert_allclose(np.asarray(m.values), np.maximum(expect, 0), rtol=1e-5, atol=1e-6)
     assert m.meta["negative_rgb_clipped"] == 2
+
+
+def test_cornell_comments_and_bad_content_named(tmp_path):
+    # '#' comments run to the end of the line, also after numbers, and may hold '#' themselves
+    p = tmp_path / "c.brdf"
+    write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + [0.2] * 31])
+    text = p.read_text().splitlines()
+    text[1] += "  # 31 wavelengths # of 10 nm"
+    p.write_text("\n".join(text) + "\n")
+    np.testing.assert_allclose(np.asarray(brdffit.load(p, format="cornell").values), [[0.2] * 3], rtol=1e-6)
+    bad = tmp_path / "bad.brdf"
+    bad.write_text(p.read_text().replace("0.200000", "0.2x0", 1))
+    with pytest.raises(InputError, match=r"bad\.brdf.*not a number: '0\.2x0'"):
+        brdffit.load(bad)
+    empty = tmp_path / "empty.brdf"
+    empty.write_text("# only a comment\n")
+    with pytest.raises(InputError, match=r"empty\.brdf.*no numbers"):
+        brdffit.load(empty)
+    binary = tmp_path / "bin.brdf"
+    binary.write_bytes(b"31 400 \xff\xfe\x00 500")
+    with pytest.raises(InputError, match=r"bin\.brdf.*binary"):
+        brdffit.load(binary)
