@@ -1,5 +1,6 @@
-"""Shared fixtures. Real measurements come from ../shared/data or $BRDFFIT_DATA; tests that need
-them skip with a reason when they are absent."""
+"""Shared fixtures. Real measurements come from $BRDFFIT_DATA when it is set (and only from there:
+``BRDFFIT_DATA=/nonexistent`` runs the suite as without the data, to check that nothing relies on
+them), else from ../shared/data; tests that need them skip with a reason when they are absent."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def data_dir() -> Path | None:
     env = os.environ.get("BRDFFIT_DATA")
-    candidates = [Path(env)] if env else []
-    candidates.append(REPO.parent / "shared" / "data")
+    candidates = [Path(env)] if env else [REPO.parent / "shared" / "data"]
     for c in candidates:
         if (c / "measured").is_dir():
             return c

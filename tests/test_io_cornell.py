@@ -76,3 +76,75 @@ def test_format_override(tmp_path):
     assert m.n_samples == 1 and m.meta["format"] == "cornell"
     with pytest.raises(InputError, match="unknown format"):
         brdffit.load(p)
+
+
+def _colour_science_rgb(spectra):
+    """Independent path: colour-science's tabulated CIE 1931 2-degree CMFs at the file's wavelengths,
+    its XYZ_to_RGB (sRGB primaries, no adaptation), white-balanced so a constant 1 gives (1, 1, 1)."""
+    import colour
+
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"][np.asarray(WL)]  # (31, 3)
+
+    def rgb(s):
+        return colour.XYZ_to_RGB(np.asarray(s) @ cmfs, "sRGB", illuminant=None, chromatic_adaptation_transform=None)
+
+    return rgb(spectra) / rgb(np.ones(len(WL)))
+
+
+def test_spectral_colours_pinned_against_colour_science():
+    M = spectral_to_rgb_matrix(WL)
+    rng = np.random.default_rng(0)
+    spectra = rng.uniform(0, 1, (20, len(WL)))
+    np.testing.assert_allclose(spectra @ M, _colour_science_rgb(spectra), rtol=1e-10, atol=1e-12)
+    # a spectrum of 1 above 600 nm: red with small negative green/blue (outside the Rec. 709 gamut)
+    red = (np.asarray(WL) > 600).astype(float)
+    np.testing.assert_allclose(red @ M, [0.7137, -0.0532, -0.0122], atol=5e-4)
+
+
+def test_spectral_line_pinned_against_published_cie_and_iec_values():
+    """A line at 600 nm: published CIE 1931 2-degree x,y,z-bar(600) = (1.0622, 0.6310, 0.0008) and the
+    IEC 61966-2-1 XYZ -> sRGB matrix; the white is the sum of the CMFs over the 31 wavelengths."""
+    import colour
+
+    iec = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
+    white_xyz = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"][np.asarray(WL)].sum(axis=0)
+    expect = (iec @ [1.0622, 0.6310, 0.0008]) / (iec @ white_xyz)
+    line = (np.asarray(WL) == 600).astype(float)
+    np.testing.assert_allclose(line @ spectral_to_rgb_matrix(WL), expect, rtol=2e-3, atol=1e-5)
+
+
+def test_cornell_reader_colours(tmp_path):
+    # the reader applies that conversion per sample, light = first angle pair; negatives clipped and counted
+    from brdffit.io.cornell import read
+
+    red = [1.0 if w > 600 else 0.0 for w in WL]
+    blue = [1.0 if w < 480 else 0.0 for w in WL]
+    p = tmp_path / "rb.brdf"
+    write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + red, [0.2, 0.0, 0.2, 1.0] + blue])
+    expect = _colour_science_rgb(np.array([red, blue]))
+    np.testing.assert_allclose(read(p, clip_negative=False).values, expect, rtol=1e-5, atol=1e-6)
+    m = brdffit.load(p)
+    np.testing.assert_allclose(np.asarray(m.values), np.maximum(expect, 0), rtol=1e-5, atol=1e-6)
+    assert m.meta["negative_rgb_clipped"] == 2
+
+
+def test_cornell_comments_and_bad_content_named(tmp_path):
+    # '#' comments run to the end of the line, also after numbers, and may hold '#' themselves
+    p = tmp_path / "c.brdf"
+    write_cornell(p, [[0.5, 0.0, 0.3, np.pi] + [0.2] * 31])
+    text = p.read_text().splitlines()
+    text[1] += "  # 31 wavelengths # of 10 nm"
+    p.write_text("\n".join(text) + "\n")
+    np.testing.assert_allclose(np.asarray(brdffit.load(p, format="cornell").values), [[0.2] * 3], rtol=1e-6)
+    bad = tmp_path / "bad.brdf"
+    bad.write_text(p.read_text().replace("0.200000", "0.2x0", 1))
+    with pytest.raises(InputError, match=r"bad\.brdf.*not a number: '0\.2x0'"):
+        brdffit.load(bad)
+    empty = tmp_path / "empty.brdf"
+    empty.write_text("# only a comment\n")
+    with pytest.raises(InputError, match=r"empty\.brdf.*no numbers"):
+        brdffit.load(empty)
+    binary = tmp_path / "bin.brdf"
+    binary.write_bytes(b"31 400 \xff\xfe\x00 500")
+    with pytest.raises(InputError, match=r"bin\.brdf.*binary"):
+        brdffit.load(binary)

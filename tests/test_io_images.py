@@ -42,10 +42,21 @@ def write_folder(root, kind="png", layout="flat", table=None, prefix="", skip=()
     return root
 
 
+def eotf(c):
+    """Expected linear values from colour-science's own sRGB EOTF (IEC 61966-2-1), not the product's."""
+    import colour
+
+    return colour.models.eotf_sRGB(np.asarray(c, np.float64))
+
+
 def test_srgb_eotf_exact():
     c = np.array([0.0, 0.04045, 0.5, 1.0])
     np.testing.assert_allclose(srgb_to_linear(c), [0, 0.04045 / 12.92, ((0.555) / 1.055) ** 2.4, 1.0], rtol=1e-15)
     np.testing.assert_allclose(linear_to_srgb(srgb_to_linear(c)), c, atol=1e-12)
+    every_code = np.arange(256) / 255.0
+    np.testing.assert_allclose(srgb_to_linear(every_code), eotf(every_code), rtol=1e-12, atol=1e-15)
+    # by hand from the IEC 61966-2-1 formula: code 128 -> 0.2158605, code 188 -> 0.5028865 (8-bit, /255)
+    np.testing.assert_allclose(srgb_to_linear(np.array([128, 188]) / 255), [0.2158605, 0.5028865], rtol=1e-6)
 
 
 @pytest.mark.parametrize("layout", ["flat", "views"])
@@ -54,7 +65,7 @@ def test_png_folder_colours(tmp_path, layout):
     root = write_folder(tmp_path / "btf", "png", layout, table, prefix="mat_")
     m = brdffit.load(root)
     assert m.grid == "ubo81" and m.meta["layout"] == ("flat" if layout == "flat" else "per-view folders")
-    np.testing.assert_allclose(m.table(), srgb_to_linear(table / 255.0), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(m.table(), eotf(table / 255.0), rtol=1e-12, atol=1e-15)
     wi, wo = brdffit.ubo_pairs()
     np.testing.assert_array_equal(np.asarray(m.wi), wi)
     np.testing.assert_array_equal(np.asarray(m.wo), wo)
@@ -121,14 +132,14 @@ def test_read_image_kinds(tmp_path):
 
     grey = np.array([[0, 128], [255, 64]], np.uint8)
     Image.fromarray(grey, "L").save(tmp_path / "g.png")
-    np.testing.assert_allclose(read_image(tmp_path / "g.png")[..., 0], srgb_to_linear(grey / 255.0))
+    np.testing.assert_allclose(read_image(tmp_path / "g.png")[..., 0], eotf(grey / 255.0))
     sixteen = np.array([[0, 30000], [65535, 1000]], np.uint16)
     Image.fromarray(sixteen).save(tmp_path / "s.png")
-    np.testing.assert_allclose(read_image(tmp_path / "s.png")[..., 0], srgb_to_linear(sixteen / 65535.0))
+    np.testing.assert_allclose(read_image(tmp_path / "s.png")[..., 0], eotf(sixteen / 65535.0))
     np.testing.assert_allclose(read_image(tmp_path / "s.png", srgb=False)[..., 0], sixteen / 65535.0)
     rgb = np.full((8, 8, 3), (200, 100, 50), np.uint8)
     Image.fromarray(rgb).save(tmp_path / "c.jpg", quality=95)
-    np.testing.assert_allclose(read_image(tmp_path / "c.jpg").mean(axis=(0, 1)), srgb_to_linear(np.array([200, 100, 50]) / 255), atol=0.01)
+    np.testing.assert_allclose(read_image(tmp_path / "c.jpg").mean(axis=(0, 1)), eotf(np.array([200, 100, 50]) / 255), atol=0.01)
 
 
 def test_option_errors(tmp_path):

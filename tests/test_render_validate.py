@@ -29,10 +29,22 @@ def read_exr(path) -> np.ndarray:
         return np.asarray(f.channels()["RGB"].pixels)
 
 
+PHONG_CLASSIC = {"kd": [0.3, 0.25, 0.2], "ks": 0.4, "n": 3.0}
+
+
+def phong_classic_measurement() -> Measurement:
+    """A non-reciprocal reference (f(l, v) != f(v, l)): a light/view swap anywhere shows."""
+    wi, wo = ubo_pairs()
+    model = models.get("phong_classic")
+    values = np.asarray(model.eval(model.check_params(PHONG_CLASSIC), wi, wo))
+    return Measurement(wi, wo, values, name="phong_classic_table", grid="ubo81")
+
+
 def test_validate_writes_everything(tmp_path):
     out = tmp_path / "val"
     lights = np.deg2rad([[0, 0], [50, 120]])
-    v = validate(ggx_measurement(), ("ggx", GGX), lights=lights, size=32, out=out, spp=2)
+    ref = phong_classic_measurement()
+    v = validate(ref, ("phong_classic", PHONG_CLASSIC), lights=lights, size=32, out=out, spp=2)
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
         ["metrics.json", "table.png", "table_reference.exr", "table_fit.exr"]
@@ -41,7 +53,14 @@ def test_validate_writes_everything(tmp_path):
     assert sorted(p.name for p in v.files) == names
     np.testing.assert_array_equal(read_exr(out / "fit_t50_p120.exr"), v.fit[1])
     np.testing.assert_array_equal(read_exr(out / "reference_t00_p000.exr"), v.reference[0])
-    assert read_exr(out / "table_fit.exr").shape == (81, 81, 3)
+    # the tables are [light, view]: the reference as measured, the fit as the model evaluated here
+    # (phong_classic is not reciprocal, so a transposed table on either side fails)
+    wi, wo = ubo_pairs()
+    model = models.get("phong_classic")
+    expect_fit = np.asarray(model.eval(model.check_params(PHONG_CLASSIC), wi, wo)).reshape(81, 81, 3)
+    assert np.max(np.abs(expect_fit - expect_fit.transpose(1, 0, 2))) > 0.1 * expect_fit.max()
+    np.testing.assert_allclose(read_exr(out / "table_fit.exr"), expect_fit, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(read_exr(out / "table_reference.exr"), ref.table(), rtol=1e-6, atol=1e-7)
     m = json.loads((out / "metrics.json").read_text())
     assert len(m["lights"]) == 2
     for block in [*m["lights"], m["overall"]]:
@@ -51,6 +70,21 @@ def test_validate_writes_everything(tmp_path):
     assert m["table"]["rmse"] < 1e-9
     # the same fit against its own table: interpolation error only, small
     assert m["overall"]["relative_rmse"] < 0.05 and m["overall"]["flip"] < 0.1
+
+
+def test_table_metrics_of_a_different_fit_by_hand():
+    """Table metrics of a Lambert fit against the phong_classic reference, computed here in numpy."""
+    ref = phong_classic_measurement()
+    kd = np.array([0.5, 0.4, 0.3])
+    v = validate(ref, ("lambert", {"kd": kd}), lights=default_lights(1), size=16, spp=1)
+    r = ref.table()
+    f = np.broadcast_to(kd / np.pi, r.shape)
+    d = f - r
+    t = v.metrics["table"]
+    assert t["rmse"] == pytest.approx(np.sqrt(np.mean(d**2)), rel=1e-6)
+    assert t["relative_rmse"] == pytest.approx(np.sqrt(np.mean(d**2) / np.mean(r**2)), rel=1e-6)
+    assert t["log_rmse"] == pytest.approx(np.sqrt(np.mean((np.log1p(f) - np.log1p(r)) ** 2)), rel=1e-6)
+    assert t["valid_pairs"] == 6561
 
 
 def test_worse_fit_scores_worse(tmp_path):

@@ -46,3 +46,14 @@ def test_pytest_plugin_fixtures_in_a_users_suite(tmp_path):
                           capture_output=True, text=True, env=env_missing, cwd=tmp_path, timeout=300)
     assert "1 passed, 1 skipped" in proc.stdout, proc.stdout[-2000:]
     assert "no real measurements" in proc.stdout
+
+
+def test_model_checker_reports_negative_and_non_finite_values():
+    from brdffit.testing import model_problems
+
+    assert model_problems("lambert") == []
+    # kd < 0 makes f_r = kd/pi negative everywhere: the checker must say so
+    problems = model_problems("lambert", param_sets=[{"kd": -0.5}])
+    assert problems and "negative" in problems[0] and "kd=-0.5" in problems[0]
+    problems = model_problems("lambert", param_sets=[{"kd": float("nan")}])
+    assert problems and "non-finite" in problems[0]
