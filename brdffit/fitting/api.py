@@ -16,6 +16,7 @@ from . import init as _init
 from .losses import check_loss
 from .problem import Data, evaluate, flat_residual, prepare, resolve_model
 from .result import FitResult
+from .space import AT_BOUND_RTOL, ParameterSpace, _span, fit_warnings, sample_spacing
 from .solve import (
     DEFAULT_ATOL,
     DEFAULT_MAX_STEPS,
@@ -39,7 +40,8 @@ def _jacobian_fn(model: Model, loss: str):
     return jax.jit(jax.jacfwd(flat_residual(model, loss)))
 
 
-def standard_errors(model: Model, loss: str, params, data: Data, loss_value: float, n_residuals: int):
+def standard_errors(model: Model, loss: str, params, data: Data, loss_value: float, n_residuals: int,
+                    space: ParameterSpace | None = None):
     """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
 
     None for a parameter at one of its bounds (the active constraint makes the Gaussian
@@ -50,10 +52,10 @@ def standard_errors(model: Model, loss: str, params, data: Data, loss_value: flo
     """
     v = np.asarray(model.flatten(params))
     J = np.asarray(_jacobian_fn(model, loss)(jnp.asarray(v), data))
-    lo, hi = model.bounds()
-    span = hi - lo
-    at_bound = (np.abs(v - lo) <= 1e-9 * span + 1e-300) | (np.abs(v - hi) <= 1e-9 * span)
-    free = ~at_bound
+    # [params] on a bound of the fit's space (``space``, default the declared bounds), or held
+    # there by fixed=: no Gaussian approximation.
+    space = space or ParameterSpace.build(model)
+    free = space.free & ~_entries_at_bound(space, v)
     out: dict[str, np.ndarray | None] = {p.name: None for p in model.params}
     if not free.any() or not np.all(np.isfinite(J)):
         return out
@@ -91,25 +93,40 @@ ROUND_STEPS = 20  # measured: 50 let the first round crawl along a bound for ~50
 NEAR_BOUND = 1e-3
 
 
-def _axis_distance(model: Model, v: np.ndarray):
-    """Distance of each flat parameter to its lower / upper bound, in fractions of its axis."""
-    lo_all, hi_all = [], []
+def _flat_slices(model: Model):
     i = 0
     for p in model.params:
         n = model.size(p)
-        x = v[i : i + n]
-        if p.scale == "log":
-            a, b, y = np.log(p.lower), np.log(p.upper), np.log(np.maximum(x, p.lower))
-        else:
-            a, b, y = p.lower, p.upper, x
-        w = max(b - a, 1e-300)
-        lo_all.append((y - a) / w)
-        hi_all.append((b - y) / w)
+        yield p, slice(i, i + n)
         i += n
+
+
+def _entries_at_bound(space: ParameterSpace, v) -> np.ndarray:
+    tol = AT_BOUND_RTOL * _span(space.model, space.lo, space.hi)
+    return (np.isfinite(space.lo) & (v <= space.lo + tol)) | (np.isfinite(space.hi) & (v >= space.hi - tol))
+
+
+def _axis_distance(space: ParameterSpace, v: np.ndarray):
+    """Distance of each flat parameter to its lower / upper bound, in fractions of its axis (the
+    finite range's width where the box is infinite; inf from an infinite bound)."""
+    lo_all, hi_all = [], []
+    for p, sl in _flat_slices(space.model):
+        lo, hi, x = space.lo[sl], space.hi[sl], v[sl]
+        f_lo, f_hi = p.finite_range
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if p.scale == "log":
+                a, b, y = np.log(lo), np.log(hi), np.log(np.maximum(x, lo))
+                fa, fb = np.log(f_lo), np.log(f_hi)
+            else:
+                a, b, y = lo, hi, x
+                fa, fb = f_lo, f_hi
+            w = np.maximum(np.where(np.isfinite(b - a), b - a, fb - fa), 1e-300)
+            lo_all.append(np.where(np.isfinite(a), (y - a) / w, np.inf))
+            hi_all.append(np.where(np.isfinite(b), (b - y) / w, np.inf))
     return np.concatenate(lo_all), np.concatenate(hi_all)
 
 
-def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol, atol, max_steps):
+def _active_set_solve(space: ParameterSpace, loss: str, solver: str, v0, data: Data, *, rtol, atol, max_steps):
     """Solve with an active set of parameters held at their bounds.
 
     The fold transform (models.base) keeps iterates in the box, but when the optimum lies *on* a
@@ -120,8 +137,9 @@ def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol,
     and held parameters whose gradient points back into the box are released (KKT check). It
     ends when a round converges with an unchanged active set, or after ``max_steps`` in total.
     """
-    v = np.asarray(v0, dtype=np.float64).copy()
-    lo, hi = m.bounds()
+    m = space.model
+    v = space.clip(v0)
+    lo, hi = space.lo, space.hi
     held = np.zeros(v.shape, bool)
     total_steps = 0
     compile_s = run_s = 0.0
@@ -132,7 +150,7 @@ def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol,
     round_steps = max_steps if solver == "bfgs" else min(ROUND_STEPS, max_steps)
     while True:
         g = np.asarray(jac(jnp.asarray(v), data)).T @ np.asarray(res(jnp.asarray(v), data))
-        d_lo, d_hi = _axis_distance(m, v)
+        d_lo, d_hi = _axis_distance(space, v)
         out_lo = (d_lo <= NEAR_BOUND) & (g > 0)
         out_hi = (d_hi <= NEAR_BOUND) & (g < 0)
         new_held = out_lo | out_hi
@@ -148,18 +166,19 @@ def _active_set_solve(m: Model, loss: str, solver: str, v0, data: Data, *, rtol,
             break
         held = new_held
         v = np.where(out_lo, lo, np.where(out_hi, hi, v))
-        x0 = jnp.asarray(m.to_unconstrained(m.unflatten(jnp.asarray(v))))
+        x0 = jnp.asarray(m.to_unconstrained(m.unflatten(jnp.asarray(v)), lo, hi))
         x, value, code, steps, c_s, r_s = solve_optx(
-            m, loss, solver, x0, data, ~held, rtol=rtol, atol=atol, max_steps=round_steps
+            m, loss, solver, x0, data, space.free & ~held, lo, hi, rtol=rtol, atol=atol, max_steps=round_steps
         )
         total_steps += max(steps, 1)
         compile_s += c_s
         run_s += r_s
-        v = np.asarray(m.flatten(m.from_unconstrained(jnp.asarray(x))))
+        v = space.clip(np.asarray(m.flatten(m.from_unconstrained(jnp.asarray(x), jnp.asarray(lo), jnp.asarray(hi)))))
     return v, value, code, total_steps, compile_s, run_s
 
 
-def _start_from(init, model: Model) -> np.ndarray:
+def _start_from(init, space: ParameterSpace) -> np.ndarray:
+    model = space.model
     if isinstance(init, FitResult):
         init = init.params
     if isinstance(init, str):
@@ -174,8 +193,7 @@ def _start_from(init, model: Model) -> np.ndarray:
         v = np.asarray(model.flatten(full))
     except ValueError as exc:
         raise UsageError(f"init: {exc}") from None
-    lo, hi = model.bounds()
-    return np.clip(v, lo, hi)
+    return space.clip(v)
 
 
 def fit(
@@ -192,6 +210,9 @@ def fit(
     weights=None,
     grid_budget: int = _init.GRID_BUDGET,
     scipy_jac: str = "exact",
+    bounds: Mapping[str, tuple] | None = None,
+    fixed: Mapping[str, object] | None = None,
+    physical: bool = False,
 ) -> FitResult:
     """Fit ``model`` to ``measurement``.
 
@@ -201,6 +222,11 @@ def fit(
     many further grid starts and keep the best; None (default) polishes AUTO_RETRIES further
     starts only when the first solve does not converge. Non-convergence is reported in ``.status``, never
     raised; parameters are never NaN.
+
+    Parameter space (``brdffit.fitting.space``): the model's bounds (only what its formula needs),
+    ``physical=True`` for its plausible ranges, ``bounds={"name": (lo, hi)}`` to narrow a box
+    (None on a side keeps it), ``fixed={"name": value}`` to hold a parameter. Lobes of one kind
+    come out narrowest first. ``.at_bound`` and ``.warnings`` report what the constraints decided.
     """
     loss = check_loss(loss)
     solver = check_solver(solver)
@@ -209,29 +235,33 @@ def fit(
     prep = prepare(measurement, weights)
     m = resolve_model(model, prep.channels)
     data = prep.data
+    space = ParameterSpace.build(m, bounds, fixed, physical)
 
     compile_s = run_s = init_s = 0.0
     auto = multistart is None
     extra = AUTO_RETRIES if auto else max(0, int(multistart))
     if init is None:
-        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + extra, budget=grid_budget)
+        starts, _, c_s, r_s = _init.best_starts(m, loss, data, k=1 + extra, budget=grid_budget, space=space)
         compile_s += c_s
         run_s += r_s
         init_s = c_s + r_s
     else:
-        starts = _start_from(init, m)[None, :]
+        starts = _start_from(init, space)[None, :]
 
     best = None
     for v0 in starts:
         if solver == "scipy":
             v, value, code, steps, c_s, r_s = solve_scipy(
-                m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps, jac=scipy_jac
+                m, loss, v0, data, space.lo, space.hi, space.free, rtol=rtol, atol=atol, max_steps=max_steps,
+                jac=scipy_jac,
             )
         elif solver == "lmb":
-            v, value, code, steps, c_s, r_s = solve_lmb(m, loss, v0, data, rtol=rtol, atol=atol, max_steps=max_steps)
+            v, value, code, steps, c_s, r_s = solve_lmb(
+                m, loss, v0, data, space.lo, space.hi, space.free, rtol=rtol, atol=atol, max_steps=max_steps
+            )
         else:
             v, value, code, steps, c_s, r_s = _active_set_solve(
-                m, loss, solver, v0, data, rtol=rtol, atol=atol, max_steps=max_steps
+                space, loss, solver, v0, data, rtol=rtol, atol=atol, max_steps=max_steps
             )
         compile_s += c_s
         run_s += r_s
@@ -241,10 +271,16 @@ def fit(
         if auto and code == 0:
             break
     v, value, code, steps, v0 = best
+    # [params] held entries exactly at their values; lobes of one kind narrowest first (a swap of
+    # whole interchangeable lobes: f_r and the loss are unchanged).
+    v = space.canonical(space.clip(v))
 
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
     metrics = evaluate(m, params, data)
-    stderr = standard_errors(m, loss, params, data, value, prep.n_used * prep.channels)
+    stderr = standard_errors(m, loss, params, data, value, prep.n_used * prep.channels, space)
+    at_bound = space.at_bound(v)
+    spacing = sample_spacing(np.asarray(measurement.wo)[np.asarray(measurement.valid_mask(), dtype=bool)])
+    warnings = fit_warnings(space, v, at_bound, stderr, spacing)
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:
         status = "converged (scipy least_squares)"
@@ -266,5 +302,19 @@ def fit(
         stderr=stderr,
         start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
         options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "multistart": None if multistart is None else int(multistart),
-                 "init": "grid" if init is None else "given"},
+                 "init": "grid" if init is None else "given", **space_options(bounds, fixed, physical)},
+        at_bound=at_bound,
+        warnings=tuple(warnings),
     )
+
+
+def space_options(bounds, fixed, physical) -> dict:
+    """The parameter-space arguments as JSON-ready options (only those given)."""
+    out = {}
+    if bounds:
+        out["bounds"] = {k: [None if b is None else float(b) for b in v] for k, v in bounds.items()}
+    if fixed:
+        out["fixed"] = {k: np.asarray(v, dtype=np.float64).reshape(-1).tolist() for k, v in fixed.items()}
+    if physical:
+        out["physical"] = True
+    return out

@@ -33,22 +33,42 @@ GRID_BUDGET = 128
 GRID_MARGIN = 0.04
 
 
-def _axis_values(p: Param, k: int) -> np.ndarray:
-    a, b = p._axis_bounds()
+def _axis_values(p: Param, k: int, lower: float, upper: float) -> np.ndarray:
+    # [params] the axis spans the fit's box; an infinite side takes the parameter's finite range
+    # (``Param.finite_range``: its physical range there).
+    a = lower if math.isfinite(lower) else p.finite_range[0]
+    b = upper if math.isfinite(upper) else p.finite_range[1]
+    if b <= a:  # a box entirely beyond the finite range (bounds=(2, inf) for alpha): widen it
+        b = a * 100.0 if p.scale == "log" else a + max(1.0, abs(a))
+    if lower == upper:
+        return np.asarray([lower])
+    a, b = (math.log(a), math.log(b)) if p.scale == "log" else (a, b)
     t = np.linspace(a + GRID_MARGIN * (b - a), b - GRID_MARGIN * (b - a), k)
     return np.exp(t) if p.scale == "log" else t
 
 
-def grid_for(model: Model, budget: int = GRID_BUDGET) -> np.ndarray:
+def grid_for(model: Model, budget: int = GRID_BUDGET, space=None) -> np.ndarray:
     """Grid points (G, n_nonlinear_params): every nonlinear parameter shares one value over its
-    channels at the start."""
+    channels at the start. ``space`` (a ``ParameterSpace``; default: the declared bounds) sets the
+    axes; a fixed parameter has a single value and takes no share of the budget."""
     nonlin = [p for p in model.params if not p.linear]
     if not nonlin:
         return np.zeros((1, 0))
-    k = max(2, int(math.floor(budget ** (1.0 / len(nonlin)) + 1e-9)))
+    lo, hi = (model.bounds() if space is None else (space.lo, space.hi))
+    first = dict(_first_entries(model))
+    fixed = [lo[first[p.name]] == hi[first[p.name]] for p in nonlin]
+    n_moving = max(1, len(nonlin) - sum(fixed))
+    k = max(2, int(math.floor(budget ** (1.0 / n_moving) + 1e-9)))
     k = min(k, 24)
-    axes = [_axis_values(p, k) for p in nonlin]
+    axes = [_axis_values(p, k, float(lo[first[p.name]]), float(hi[first[p.name]])) for p in nonlin]
     return np.asarray(list(itertools.product(*axes)), dtype=np.float64)
+
+
+def _first_entries(model: Model):
+    i = 0
+    for p in model.params:
+        yield p.name, i
+        i += model.size(p)
 
 
 def _params_at(model: Model, point, linear_values: dict[str, jax.Array]):
@@ -82,7 +102,8 @@ def _box_lsq(gram, rhs, lo, hi, sweeps: int = 40):
 
 @functools.lru_cache(maxsize=None)
 def vp_grid_fn(model: Model, loss: str):
-    """Compiled: (grid (G, m), data) -> (flat params (G, P), loss (G,)) for every grid point."""
+    """Compiled: (grid (G, m), data, lo (P,), hi (P,)) -> (flat params (G, P), loss (G,)) for every
+    grid point; ``lo, hi``: the fit's flat box (its entries for linear parameters are used)."""
     lin = [p for p in model.params if p.linear]
     C = model.channels
     zeros = {p.name: jnp.zeros((model.size(p),)) for p in lin}
@@ -93,10 +114,11 @@ def vp_grid_fn(model: Model, loss: str):
             elements.append((i, -1))
         else:
             elements.extend((i, c) for c in range(model.size(p)))
-    lo = jnp.asarray([lin[i].lower for i, _ in elements], dtype=jnp.float64)
-    hi = jnp.asarray([lin[i].upper for i, _ in elements], dtype=jnp.float64)
+    # [params] flat indices of the linear unknowns: their box (lo, hi) is a runtime argument.
+    starts = dict(_first_entries(model))
+    lin_index = np.asarray([starts[lin[i].name] + max(c, 0) for i, c in elements], dtype=int)
 
-    def one(point, data: Data):
+    def one(point, data: Data, lo, hi):
         wi, wo, ref, sqrt_w, cos_i, floor = data
         f0 = model.eval(_params_at(model, point, zeros), wi, wo)
         if not lin:
@@ -137,8 +159,9 @@ def vp_grid_fn(model: Model, loss: str):
         flat = model.flatten(_params_at(model, point, linear_values)) if model.params else jnp.zeros((0,))
         return flat, value
 
-    def run(grid, data):
-        return jax.lax.map(lambda pt: one(pt, data), grid, batch_size=16)
+    def run(grid, data, lo_flat, hi_flat):
+        lo, hi = lo_flat[lin_index], hi_flat[lin_index]
+        return jax.lax.map(lambda pt: one(pt, data, lo, hi), grid, batch_size=16)
 
     return jax.jit(run)
 
@@ -161,21 +184,28 @@ def _subset(data: Data) -> Data:
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
 
 
-def best_starts(model: Model, loss: str, data: Data, k: int = 1, budget: int = GRID_BUDGET):
-    """The k best grid starts: flat params (k, P), their losses (k,), compile s, run s."""
+def best_starts(model: Model, loss: str, data: Data, k: int = 1, budget: int = GRID_BUDGET, space=None):
+    """The k best grid starts: flat params (k, P), their losses (k,), compile s, run s.
+
+    ``space``: the fit's ``ParameterSpace`` (default: the declared bounds, nothing fixed)."""
     import time
 
-    grid = jnp.asarray(grid_for(model, budget))
+    grid = jnp.asarray(grid_for(model, budget, space))
+    lo, hi = model.bounds() if space is None else (space.lo, space.hi)
+    lo, hi = jnp.asarray(lo), jnp.asarray(hi)
     data = _subset(data)
     key = (model, loss, grid.shape, tuple((a.shape, str(a.dtype)) for a in data))
     compiled, compile_s = _COMPILED.get(key), 0.0
     if compiled is None:
         t0 = time.perf_counter()
-        compiled = vp_grid_fn(model, loss).lower(grid, data).compile()
+        compiled = vp_grid_fn(model, loss).lower(grid, data, lo, hi).compile()
         compile_s = time.perf_counter() - t0
         _COMPILED[key] = compiled
     t0 = time.perf_counter()
-    flats, values = jax.block_until_ready(compiled(grid, data))
+    flats, values = jax.block_until_ready(compiled(grid, data, lo, hi))
     order = np.argsort(np.asarray(values))[:k]
     run_s = time.perf_counter() - t0
-    return np.asarray(flats)[order], np.asarray(values)[order], compile_s, run_s
+    flats = np.asarray(flats)[order]
+    if space is not None:  # a fixed per-channel value the shared grid value could not carry
+        flats = np.stack([space.clip(f) for f in flats])
+    return flats, np.asarray(values)[order], compile_s, run_s

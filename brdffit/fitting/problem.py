@@ -107,10 +107,11 @@ def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Arr
 
 @functools.lru_cache(maxsize=None)
 def unconstrained_residual(model: Model, loss: str):
-    """r(x, data) with x on the solver's unconstrained axes (fold transform, see models.base)."""
+    """r(x, data, lo, hi) with x on the solver's unconstrained axes (fold transform, see
+    models.base) into the flat box lo, hi (default: the declared bounds)."""
 
-    def fn(x, data):
-        return residual_of_params(model, loss, model.from_unconstrained(x), data)
+    def fn(x, data, lo=None, hi=None):
+        return residual_of_params(model, loss, model.from_unconstrained(x, lo, hi), data)
 
     return fn
 

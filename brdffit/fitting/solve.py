@@ -94,30 +94,31 @@ def _solve_core(model: Model, loss: str, solver_name: str, rtol: float, atol: fl
     base = unconstrained_residual(model, loss)
     solver = make_solver(solver_name, rtol, atol)
 
-    def fn_x(x, data, free, anchor):
+    # [params] lo, hi (flat, may be infinite): the fit's box (ParameterSpace), runtime arguments.
+    def fn_x(x, data, free, anchor, lo, hi):
         # Held parameters (free = False) stay at their anchor value; their columns are zero.
-        return base(jnp.where(free, x, anchor), data)
+        return base(jnp.where(free, x, anchor), data, lo, hi)
 
     def fn(z, args):
-        data, free, anchor, scale = args
-        return fn_x(z / scale, data, free, anchor)
+        data, free, anchor, scale, lo, hi = args
+        return fn_x(z / scale, data, free, anchor, lo, hi)
 
-    def loss_of(x, data, free, anchor):
-        r = fn_x(x, data, free, anchor)
+    def loss_of(x, data, free, anchor, lo, hi):
+        r = fn_x(x, data, free, anchor, lo, hi)
         return jnp.sum(r**2)
 
-    def run(x0, data, free):
-        jac = jax.jacfwd(fn_x)(x0, data, free, x0)
+    def run(x0, data, free, lo, hi):
+        jac = jax.jacfwd(fn_x)(x0, data, free, x0, lo, hi)
         norms = jnp.sqrt(jnp.sum(jac**2, axis=0))
         norms = jnp.where(jnp.isfinite(norms), norms, 0.0)
         # A column that is ~0 at the start (a lobe with rho = 0) must not get a huge z-step.
         norms = jnp.maximum(norms, 1e-3 * jnp.max(norms)) / COLUMN_NORM
         scale = jnp.where(norms > 0, norms, 1.0)
-        args = (data, free, x0, scale)
+        args = (data, free, x0, scale, lo, hi)
         sol = optx.least_squares(fn, solver, x0 * scale, args=args, max_steps=max_steps, throw=False)
         x = jnp.where(free, sol.value / scale, x0)
-        l0 = loss_of(x0, data, free, x0)
-        l1 = loss_of(x, data, free, x0)
+        l0 = loss_of(x0, data, free, x0, lo, hi)
+        l1 = loss_of(x, data, free, x0, lo, hi)
         ok = jnp.all(jnp.isfinite(x)) & jnp.isfinite(l1) & (l1 <= l0)
         code = _status_code(sol.result)
         # Fallback: the start (finite by construction) when the solve produced junk.
@@ -144,28 +145,29 @@ def _shape_key(tree):
     return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
 
 
-def compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free, batched: bool = False):
+def compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free, lo, hi, batched: bool = False):
     """The compiled solve for these shapes, and its compile time (0 when cached)."""
-    key = (model, loss, solver_name, rtol, atol, max_steps, _shape_key((x0, data, free)), batched)
+    key = (model, loss, solver_name, rtol, atol, max_steps, _shape_key((x0, data, free, lo, hi)), batched)
     hit = _CACHE.get(key)
     if hit is not None:
         return hit.fn, 0.0
     core = _solve_core(model, loss, solver_name, rtol, atol, max_steps)
     fn = jax.vmap(core) if batched else core
     t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(x0, data, free).compile()
+    compiled = jax.jit(fn).lower(x0, data, free, lo, hi).compile()
     dt = time.perf_counter() - t0
     _CACHE[key] = _Compiled(compiled, dt)
     return compiled, dt
 
 
-def solve_optx(model, loss, solver_name, x0, data, free, *, rtol, atol, max_steps):
+def solve_optx(model, loss, solver_name, x0, data, free, lo, hi, *, rtol, atol, max_steps):
     """Returns (x, loss value, status code, steps, compile s, run s); ``free`` (P,) bool marks
-    the parameters the solver may move (the others stay at x0)."""
+    the parameters the solver may move (the others stay at x0); ``lo, hi``: the flat box."""
     free = jnp.asarray(free, dtype=bool)
-    fn, compile_s = compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free)
+    lo, hi = jnp.asarray(lo, dtype=jnp.float64), jnp.asarray(hi, dtype=jnp.float64)
+    fn, compile_s = compiled_solve(model, loss, solver_name, rtol, atol, max_steps, x0, data, free, lo, hi)
     t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(x0, data, free))
+    out = jax.block_until_ready(fn(x0, data, free, lo, hi))
     run_s = time.perf_counter() - t0
     x, value, code, steps = (np.asarray(a) for a in out)
     return x, float(value), int(code), int(steps), compile_s, run_s
@@ -188,35 +190,44 @@ def _scipy_fns(model, loss, v0, data):
     return (res, jac), dt
 
 
-def solve_scipy(model, loss, v0, data, *, rtol, atol, max_steps, jac: str = "exact"):
+def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str = "exact"):
     """scipy.optimize.least_squares (TRF, bounded) on the flat parameter vector.
 
     ``jac="exact"`` uses the JAX Jacobian; "2-point"/"3-point" scipy's finite differences.
+    ``lo, hi`` (may be infinite), ``free``: the fit's box; held entries stay at v0 (scipy sees
+    only the free ones: it needs lo < hi).
     Returns (v, loss value, status code, steps (function evaluations), compile s, run s).
     """
     from scipy.optimize import least_squares
 
     (res, jacf), compile_s = _scipy_fns(model, loss, jnp.asarray(v0), data)
-    lo, hi = model.bounds()
-    v0 = np.clip(np.asarray(v0, dtype=np.float64), lo, hi)
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    free = np.asarray(free, dtype=bool)
+    full0 = np.clip(np.asarray(v0, dtype=np.float64), lo, hi)
 
-    def f(v):
-        return np.asarray(res(jnp.asarray(v), data))
+    def embed(u):
+        out = full0.copy()
+        out[free] = u
+        return out
 
-    def j(v):
-        return np.asarray(jacf(jnp.asarray(v), data))
+    def f(u):
+        return np.asarray(res(jnp.asarray(embed(u)), data))
 
+    def j(u):
+        return np.asarray(jacf(jnp.asarray(embed(u)), data))[:, free]
+
+    v0 = full0[free]
     t0 = time.perf_counter()
     sol = least_squares(
-        f, v0, jac=j if jac == "exact" else jac, bounds=(lo, hi), method="trf",
+        f, v0, jac=j if jac == "exact" else jac, bounds=(lo[free], hi[free]), method="trf",
         ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=max(atol, 1e-15), max_nfev=max_steps * 10,
     )
     run_s = time.perf_counter() - t0
-    v = sol.x
+    v = embed(sol.x)
     value = float(np.sum(sol.fun**2))
     code = 0 if sol.status > 0 else (1 if sol.status == 0 else 4)
     if not (np.all(np.isfinite(v)) and np.isfinite(value)):
-        v, value, code = v0, float(np.sum(f(v0) ** 2)), 3
+        v, value, code = full0, float(np.sum(f(v0) ** 2)), 3
     return v, value, code, int(sol.nfev), compile_s, run_s
 
 
@@ -232,12 +243,12 @@ def _lmb_core(model: Model, loss: str, rtol: float, atol: float, max_steps: int)
     rtol (or the projected gradient is below atol).
     """
     fn = flat_residual(model, loss)
-    lo_np, hi_np = model.bounds()
 
-    def run(v0, data, free_mask):
-        lo = jnp.asarray(lo_np)
-        hi = jnp.asarray(hi_np)
+    # [params] lo, hi: the fit's flat box (may be infinite), runtime arguments.
+    def run(v0, data, free_mask, lo, hi):
         P = v0.shape[0]
+        # Relative-step test: a finite scale per entry (an infinite box has none).
+        box_scale = jnp.where(jnp.isfinite(hi - lo), hi - lo, 0.0) * 1e-6
         eye = jnp.eye(P, dtype=v0.dtype)
 
         def lin(v):
@@ -278,7 +289,7 @@ def _lmb_core(model: Model, loss: str, rtol: float, atol: float, max_steps: int)
             v_next = jnp.where(accept, v_new, v)
             r_next, J_next = jax.lax.cond(accept, lin, lambda _: (r, J), v_next)
             small_f = accept & ((c - c_new) <= rtol * c + atol**2)
-            small_x = jnp.max(jnp.abs(step) / (jnp.abs(v) + atol + (hi - lo) * 1e-6)) <= rtol * 10
+            small_x = jnp.max(jnp.abs(step) / (jnp.abs(v) + atol + box_scale)) <= rtol * 10
             pg = jnp.max(jnp.abs(jnp.where(held, 0.0, J_next.T @ r_next)))
             conv = (small_f & small_x) | (pg <= atol) | (~accept & (lam > 1e16))
             return v_next, r_next, J_next, lam, nu, k + 1, conv, jnp.where(conv, 0, code)
@@ -299,20 +310,21 @@ def _lmb_core(model: Model, loss: str, rtol: float, atol: float, max_steps: int)
 _LMB_CACHE: dict = {}
 
 
-def solve_lmb(model, loss, v0, data, *, rtol, atol, max_steps):
-    """Returns (v, loss value, status code, steps, compile s, run s)."""
-    v0 = jnp.asarray(np.clip(np.asarray(v0, dtype=np.float64), *model.bounds()))
-    free = jnp.ones(v0.shape, bool)
+def solve_lmb(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps):
+    """Returns (v, loss value, status code, steps, compile s, run s); ``lo, hi, free``: the box."""
+    lo, hi = jnp.asarray(lo, dtype=jnp.float64), jnp.asarray(hi, dtype=jnp.float64)
+    v0 = jnp.clip(jnp.asarray(v0, dtype=jnp.float64), lo, hi)
+    free = jnp.asarray(free, dtype=bool)
     key = (model, loss, rtol, atol, max_steps, _shape_key((v0, data)))
     compiled = _LMB_CACHE.get(key)
     compile_s = 0.0
     if compiled is None:
         t0 = time.perf_counter()
-        compiled = jax.jit(_lmb_core(model, loss, rtol, atol, max_steps)).lower(v0, data, free).compile()
+        compiled = jax.jit(_lmb_core(model, loss, rtol, atol, max_steps)).lower(v0, data, free, lo, hi).compile()
         compile_s = time.perf_counter() - t0
         _LMB_CACHE[key] = compiled
     t0 = time.perf_counter()
-    out = jax.block_until_ready(compiled(v0, data, free))
+    out = jax.block_until_ready(compiled(v0, data, free, lo, hi))
     run_s = time.perf_counter() - t0
     v, value, code, steps = (np.asarray(a) for a in out)
     return v, float(value), int(code), int(steps), compile_s, run_s

@@ -69,6 +69,12 @@ def formula(p, wi, wo):
     return spec + diff
 
 
+def halfwidth(p):
+    """(n.h)^e = 1/2 at th_h = acos(2^(-1/e)) along the narrower axis (e = max(nu, nv)); twice
+    that in reflected directions."""
+    return 2.0 * math.acos(2.0 ** (-1.0 / max(p["nu"], p["nv"])))
+
+
 MODEL = Model(
     name="ashikhmin_shirley",
     params=PARAMS,
@@ -76,4 +82,5 @@ MODEL = Model(
     citation="M. Ashikhmin, P. Shirley, An Anisotropic Phong BRDF Model, Journal of Graphics Tools 5(2), 2000",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

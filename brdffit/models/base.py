@@ -187,6 +187,11 @@ class Model:
     #: The model's specular lobes. None (the default): one lobe of kind ``name`` made of every
     #: parameter but the diffuse ``kd`` (none for a model with no other parameter).
     lobes: tuple[Lobe, ...] | None = None
+    #: ``halfwidth(params) -> radians``: half width at half maximum of the model's lobe, measured
+    #: in reflected directions (about twice the half-vector angle for a microfacet lobe), from the
+    #: lobe's parameters by their base names (floats). None where the model has no specular lobe.
+    #: Used to warn about lobes narrower than the sample spacing (``brdffit.fitting.space``).
+    halfwidth: Callable[[Mapping[str, float]], float] | None = None
 
     def __post_init__(self):
         if self.lobes is None:

@@ -58,6 +58,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * (n + 8.0) / (8.0 * jnp.pi) * m.safe_pow(h[..., 2:3], n)
 
 
+def halfwidth(p):
+    """(n.h)^n = 1/2 at th_h = acos(2^(-1/n)); twice that in reflected directions."""
+    return 2.0 * math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 MODEL = Model(
     name="blinn_phong",
     params=PARAMS,
@@ -65,4 +70,5 @@ MODEL = Model(
     citation="J. F. Blinn, Models of Light Reflection for Computer Synthesized Pictures, SIGGRAPH 1977",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -78,6 +78,12 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, h, beckmann_ndf(h, p["alpha"]))
 
 
+def halfwidth(p):
+    """Beckmann D(th_h)/D(0) ~ exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2); twice
+    that in reflected directions."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.log(2.0)))
+
+
 MODEL = Model(
     name="cook_torrance",
     params=PARAMS,
@@ -85,4 +91,5 @@ MODEL = Model(
     citation="R. L. Cook, K. E. Torrance, A Reflectance Model for Computer Graphics, ACM TOG 1(1), 1982",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

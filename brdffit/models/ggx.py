@@ -83,6 +83,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + specular_lobe(p, wi, wo)
 
 
+def halfwidth(p):
+    """D(th_h)/D(0) = 1/2 at tan th_h = alpha sqrt(sqrt(2) - 1); reflected directions: twice that."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+
+
 MODEL = Model(
     name="ggx",
     params=PARAMS,
@@ -90,4 +95,5 @@ MODEL = Model(
     citation="Walter, Marschner, Li, Torrance: Microfacet Models for Refraction through Rough Surfaces, EGSR 2007",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -92,6 +92,11 @@ def _formula(suffixes, p, wi, wo):
     return f
 
 
+def halfwidth(p):
+    """A lobe with |C| = 1 is (cos psi)^n: 1/2 at psi = acos(2^(-1/n)) (|C| != 1 trades against rho)."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 @functools.lru_cache(maxsize=None)
 def lafortune(lobes: int = 1) -> Model:
     """The Lafortune model with ``lobes`` lobes (see module doc for the parameter names)."""
@@ -110,6 +115,7 @@ def lafortune(lobes: int = 1) -> Model:
         "Non-Linear Approximation of Reflectance Functions, SIGGRAPH 1997",
         reciprocal=True,
         doc=__doc__,
+        halfwidth=halfwidth,
         lobes=tuple(Lobe("lafortune", tuple(q + s for q in ("rho", "cx", "cz", "n"))) for s in suffixes),
     )
 

@@ -63,6 +63,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * (n + 2.0) / (2.0 * jnp.pi) * lobe(wi, wo, n)
 
 
+def halfwidth(p):
+    """(r.v)^n = 1/2 at the angle acos(2^(-1/n)) from the mirror direction."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 MODEL = Model(
     name="phong",
     params=PARAMS,
@@ -71,4 +76,5 @@ MODEL = Model(
     "normalisation: R. R. Lewis, Making Shaders More Physically Plausible, CGF 13(2), 1994",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

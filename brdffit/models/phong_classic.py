@@ -55,6 +55,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * spec
 
 
+def halfwidth(p):
+    """(r.v)^n = 1/2 at the angle acos(2^(-1/n)) from the mirror direction."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 MODEL = Model(
     name="phong_classic",
     params=PARAMS,
@@ -62,4 +67,5 @@ MODEL = Model(
     citation="B. T. Phong, Illumination for Computer Generated Pictures, CACM 18(6), 1975",
     reciprocal=False,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

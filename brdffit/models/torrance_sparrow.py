@@ -69,6 +69,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, h, gaussian_facets(h, p["m"]))
 
 
+def halfwidth(p):
+    """exp(-(th_h/m)^2) = 1/2 at th_h = m sqrt(ln 2); twice that in reflected directions."""
+    return 2.0 * p["m"] * math.sqrt(math.log(2.0))
+
+
 MODEL = Model(
     name="torrance_sparrow",
     params=PARAMS,
@@ -77,4 +82,5 @@ MODEL = Model(
     "JOSA 57(9), 1967",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -57,6 +57,12 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * jnp.exp(e) / norm
 
 
+def halfwidth(p):
+    """exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2), along the narrower axis;
+    twice that in reflected directions."""
+    return 2.0 * math.atan(min(p["alpha_x"], p["alpha_y"]) * math.sqrt(math.log(2.0)))
+
+
 MODEL = Model(
     name="ward",
     params=PARAMS,
@@ -64,4 +70,5 @@ MODEL = Model(
     citation="G. J. Ward, Measuring and Modeling Anisotropic Reflection, SIGGRAPH 1992",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )
