@@ -16,6 +16,36 @@ import numpy as np
 from . import EXIT_NOT_CONVERGED, EXIT_OK, cli
 
 
+def parse_assignments(option: str, items, expect_pair: bool) -> dict:
+    """``--bound NAME=LO,HI`` (either side may be empty: keep it) / ``--fix NAME=V[,V,V]`` ->
+    dict for ``fit(bounds=..., fixed=...)``; a malformed item is a usage error (exit 2)."""
+    from ..errors import UsageError
+
+    out = {}
+    for item in items:
+        name, eq, text = item.partition("=")
+        name = name.strip()
+        if not eq or not name or not text.strip():
+            form = "NAME=LO,HI" if expect_pair else "NAME=VALUE"
+            raise UsageError(f"{option} {item!r}: expected {form}")
+        parts = [t.strip() for t in text.split(",")]
+        if expect_pair and len(parts) != 2:
+            raise UsageError(f"{option} {item!r}: expected two numbers LO,HI (an empty side keeps that bound)")
+        values = []
+        for t in parts:
+            if expect_pair and t == "":
+                values.append(None)
+                continue
+            try:
+                values.append(float(t))
+            except ValueError:
+                raise UsageError(f"{option} {item!r}: {t!r} is not a number") from None
+        if name in out:
+            raise UsageError(f"{option}: {name!r} given twice")
+        out[name] = tuple(values) if expect_pair else (values[0] if len(values) == 1 else values)
+    return out
+
+
 def plot_fit(measurement, result, path: Path) -> None:
     import matplotlib
 
@@ -73,9 +103,15 @@ def plot_fit(measurement, result, path: Path) -> None:
 @click.option("--solver", default="lm", show_default=True, help="lm | lmb | gauss_newton | dogleg | bfgs | scipy")
 @click.option("--multistart", default=0, show_default=True, help="Further grid starts to polish.")
 @click.option("--max-steps", default=200, show_default=True)
+@click.option("--bound", "bound_items", multiple=True, metavar="NAME=LO,HI",
+              help="Narrow a parameter's box, e.g. ggx1.alpha=0.01,0.5 (an empty side keeps it). Repeatable.")
+@click.option("--fix", "fix_items", multiple=True, metavar="NAME=VALUE",
+              help="Hold a parameter at a value (or one per channel: kd=0.1,0.2,0.3). Repeatable.")
+@click.option("--physical", is_flag=True, help="Keep parameters in their plausible ranges (albedo <= 1, ...).")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
-def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
+def fit_command(source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
+                force) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from rich.console import Console
 
@@ -88,18 +124,26 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
 
     check_loss(loss)
     check_solver(solver)
-    resolve_model(model, 3)  # unknown model -> usage error before any work
+    from ..fitting.space import ParameterSpace
+
+    bounds = parse_assignments("--bound", bound_items, expect_pair=True)
+    fixed = parse_assignments("--fix", fix_items, expect_pair=False)
+    # unknown model, parameter names or values -> usage error before any work
+    ParameterSpace.build(resolve_model(model, 3), bounds, fixed, physical)
     console = Console(stderr=True)
     with console.status(f"loading {source}"):
         m = load(source)
     out = out or Path(f"fit-{m.name}-{model.replace('+', '_')}")
     check_target(out, force)
     with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
-        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
+        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps,
+                bounds=bounds, fixed=fixed, physical=physical)
     with atomic_dir(out, force) as tmp:
         r.to_json(tmp / "fit.json")
         plot_fit(m, r, tmp / "fit.png")
     console.print(repr(r), soft_wrap=True)
+    for line in r.warnings:  # one line each, on stderr with the rest of the report
+        console.print(f"warning: {line}", soft_wrap=True, markup=False, highlight=False)
     console.print(f"wrote {out}/fit.json, {out}/fit.png")
     if not r.converged:
         console.print(f"[bold red]not converged[/]: {r.status}")

@@ -36,10 +36,11 @@ import numpy as np
 from ..errors import UsageError
 from ..measurement import Measurement
 from . import init as _init
-from .api import _jacobian_fn, standard_errors
+from .api import space_options, standard_errors
 from .losses import check_loss
 from .problem import Data, evaluate, flat_residual, prepare, resolve_model
 from .result import FitResult
+from .space import ParameterSpace, fit_warnings, sample_spacing
 from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, _lmb_core, _solve_core, check_solver
 
 
@@ -47,36 +48,35 @@ from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, _
 def _batched_grid(model, loss):
     run = _init.vp_grid_fn(model, loss)
 
-    def one(grid, data):
-        flats, values = run(grid, data)
+    def one(grid, data, lo, hi):
+        flats, values = run(grid, data, lo, hi)
         i = jnp.argmin(values)
         return flats[i], values[i]
 
-    return jax.jit(jax.vmap(one, in_axes=(None, 0)))
+    return jax.jit(jax.vmap(one, in_axes=(None, 0, None, None)))
 
 
 @functools.lru_cache(maxsize=None)
 def _batched_solve(model, loss, solver, rtol, atol, max_steps):
-    return jax.jit(jax.vmap(_solve_core(model, loss, solver, rtol, atol, max_steps)))
+    return jax.jit(jax.vmap(_solve_core(model, loss, solver, rtol, atol, max_steps), in_axes=(0, 0, 0, None, None)))
 
 
 @functools.lru_cache(maxsize=None)
 def _batched_lmb(model, loss, rtol, atol, max_steps):
-    return jax.jit(jax.vmap(_lmb_core(model, loss, rtol, atol, max_steps)))
+    return jax.jit(jax.vmap(_lmb_core(model, loss, rtol, atol, max_steps), in_axes=(0, 0, None, None, None)))
 
 
 @functools.lru_cache(maxsize=None)
 def _batched_outward(model, loss):
     jac = jax.jacfwd(flat_residual(model, loss))
     fn = flat_residual(model, loss)
-    lo, hi = (jnp.asarray(b) for b in model.bounds())
 
-    def one(v, data):
+    def one(v, data, lo, hi):
         g = jac(v, data).T @ fn(v, data)
-        tol = 1e-9 * (hi - lo)
+        tol = 1e-9 * jnp.where(jnp.isfinite(hi - lo), hi - lo, 1.0)
         return ((v <= lo + tol) & (g > 0)) | ((v >= hi - tol) & (g < 0))
 
-    return jax.jit(jax.vmap(one))
+    return jax.jit(jax.vmap(one, in_axes=(0, 0, None, None)))
 
 
 def _shard(tree):
@@ -104,8 +104,12 @@ def fit_batch(
     chunk: int = 64,
     sort: bool = True,
     grid_budget: int = _init.GRID_BUDGET,
+    bounds=None,
+    fixed=None,
+    physical: bool = False,
 ) -> list[FitResult]:
-    """Fit ``model`` to each measurement independently; see the module docstring."""
+    """Fit ``model`` to each measurement independently; see the module docstring.
+    ``bounds``, ``fixed``, ``physical``: the parameter space, as for ``fit``."""
     loss = check_loss(loss)
     solver = check_solver(solver)
     if solver == "scipy":
@@ -118,12 +122,15 @@ def fit_batch(
         raise UsageError(f"fit_batch: all measurements need the same samples and channels, got {sorted(shapes)}")
     preps = [prepare(m) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
+    space = ParameterSpace.build(mdl, bounds, fixed, physical)
+    lo, hi, free = jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free)
     data = Data(*(jnp.stack([p.data[i] for p in preps]) for i in range(6)))
-    grid = jnp.asarray(_init.grid_for(mdl, grid_budget))
+    grid = jnp.asarray(_init.grid_for(mdl, grid_budget, space))
     n = len(measurements)
 
     t0 = time.perf_counter()
-    v0, l0 = jax.block_until_ready(_batched_grid(mdl, loss)(grid, _shard(data)))
+    v0, l0 = jax.block_until_ready(_batched_grid(mdl, loss)(grid, _shard(data), lo, hi))
+    v0 = np.stack([space.clip(v) for v in np.asarray(v0)])
     init_s = time.perf_counter() - t0
     order = np.argsort(np.asarray(l0)) if sort else np.arange(n)
 
@@ -143,13 +150,13 @@ def fit_batch(
         t1 = time.perf_counter()
         steps = np.zeros(len(idx_p), int)
         if solver == "lmb":
-            v, value, code, st = _batched_lmb(mdl, loss, rtol, atol, max_steps)(v, d, jnp.ones(v.shape, bool))
+            v, value, code, st = _batched_lmb(mdl, loss, rtol, atol, max_steps)(v, d, free, lo, hi)
             steps += np.asarray(st)
         for _round in range(0 if solver == "lmb" else 2):
-            held = outward(v, d)
-            x0 = jax.vmap(lambda vv: mdl.to_unconstrained(mdl.unflatten(vv)))(v)
-            x, value, code, st = solve(x0, d, ~held)
-            v = jax.vmap(lambda xx: mdl.flatten(mdl.from_unconstrained(xx)))(x)
+            held = outward(v, d, lo, hi)
+            x0 = jax.vmap(lambda vv: mdl.to_unconstrained(mdl.unflatten(vv), lo, hi))(v)
+            x, value, code, st = solve(x0, d, free & ~held, lo, hi)
+            v = jax.vmap(lambda xx: mdl.flatten(mdl.from_unconstrained(xx, lo, hi)))(x)
             steps += np.asarray(st)
         jax.block_until_ready(v)
         dt = time.perf_counter() - t1
@@ -162,15 +169,21 @@ def fit_batch(
 
     results = []
     for i, (m, prep) in enumerate(zip(measurements, preps)):
-        params = {k: np.asarray(a) for k, a in mdl.unflatten(jnp.asarray(v_all[i])).items()}
+        v_i = space.canonical(space.clip(v_all[i]))  # [params] fixed exactly, lobes in order
+        params = {k: np.asarray(a) for k, a in mdl.unflatten(jnp.asarray(v_i)).items()}
+        stderr = standard_errors(mdl, loss, params, prep.data, float(val_all[i]), prep.n_used * prep.channels, space)
+        at_bound = space.at_bound(v_i)
+        spacing = sample_spacing(np.asarray(m.wo)[np.asarray(m.valid_mask(), dtype=bool)])
         results.append(FitResult(
             model=mdl, params=params, loss=loss, loss_value=float(val_all[i]),
             metrics=evaluate(mdl, params, prep.data), steps=int(steps_all[i]), converged=bool(code_all[i] == 0),
             status=STATUS_TEXT[int(code_all[i])],
             seconds={"compile": 0.0, "run": float(secs[i] + init_s / n), "init": init_s / n},
             solver=solver, data_name=m.name, n_used=prep.n_used, n_excluded=prep.n_excluded, excluded=prep.excluded,
-            stderr=standard_errors(mdl, loss, params, prep.data, float(val_all[i]), prep.n_used * prep.channels),
+            stderr=stderr,
             start={k: np.asarray(a) for k, a in mdl.unflatten(jnp.asarray(np.asarray(v0)[i])).items()},
-            options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": chunk},
+            options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": chunk,
+                     **space_options(bounds, fixed, physical)},
+            at_bound=at_bound, warnings=tuple(fit_warnings(space, v_i, at_bound, stderr, spacing)),
         ))
     return results
