@@ -182,6 +182,7 @@ def test_fixed_and_bounds_hold():
     meas = _scattered("ggx", truth)
     r = fit(meas, "ggx", fixed={"f0": 0.1, "kd": [0.3, 0.25, 0.1]}, bounds={"alpha": (0.3, 0.6)})
     assert r.params["f0"].tolist() == [0.1]  # exactly, not approximately
+    assert r.metrics["log"] == pytest.approx(r.loss_value, rel=1e-9)  # the solver held it too
     assert r.params["kd"].tolist() == [0.3, 0.25, 0.1]
     assert 0.3 <= float(r.params["alpha"][0]) <= 0.6
     assert r.at_bound == {"alpha": "lower"}  # the data want 0.25
@@ -253,3 +254,16 @@ def test_cli_bound_fix_physical(glossy, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
         assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_fit_batch_takes_the_same_space():
+    truth = {"kd": [0.3, 0.2, 0.1], "ks": [1.4, 1.3, 1.2], "alpha": [0.25], "f0": [0.3]}
+    batch = [_scattered("ggx", truth, seed=s) for s in (0, 1)]
+    rs = brdffit.fit_batch(batch, "ggx", fixed={"f0": 0.3}, bounds={"alpha": (0.05, 0.5)})
+    for r in rs:
+        assert r.params["f0"].tolist() == [0.3]
+        np.testing.assert_allclose(r.params["ks"], [1.4, 1.3, 1.2], rtol=1e-4)  # ks > 1 by default
+        assert r.at_bound == {} and r.warnings == ()
+    rp = brdffit.fit_batch(batch[:1], "ggx", physical=True)[0]
+    assert rp.at_bound == {"ks": "upper"} and np.all(rp.params["ks"] <= 1.0)

@@ -202,11 +202,13 @@ class ParameterSpace:
                 out[name] = "; ".join(parts)
         return out
 
-    def bound_origin(self, name: str) -> str:
-        """Where a parameter's box comes from, for messages."""
+    def bound_origin(self, name: str, side: str) -> str:
+        """Where a parameter's lower or upper bound comes from, for messages."""
         if name in self.overridden:
             return "set by bounds="
-        if self.physical:
+        p = self.model.param(name)
+        declared = p.lower if side == "lower" else p.upper
+        if self.physical and self.describe_bound(name, side) != declared:
             return "its physical range; fit without physical=True to allow more"
         return "the formula's limit"
 
@@ -279,7 +281,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
     for name, side in at_bound.items():
         which = side.split(" ")[0]
         value = space.describe_bound(name, which)
-        out.append(f"{name} ended on its {side} bound {value:g} ({space.bound_origin(name)}).")
+        out.append(f"{name} ended on its {side} bound {value:g} ({space.bound_origin(name, which)}).")
     if spacing is not None:
         for lobe, hw in lobe_halfwidths(space.model, v):
             if 2.0 * hw < spacing:
