@@ -266,4 +266,6 @@ def test_fit_batch_takes_the_same_space():
         np.testing.assert_allclose(r.params["ks"], [1.4, 1.3, 1.2], rtol=1e-4)  # ks > 1 by default
         assert r.at_bound == {} and r.warnings == ()
     rp = brdffit.fit_batch(batch[:1], "ggx", physical=True)[0]
-    assert rp.at_bound == {"ks": "upper"} and np.all(rp.params["ks"] <= 1.0)
+    # f0 is shared by the channels: raising it lets two of them stay below the cap.
+    assert list(rp.at_bound) == ["ks"] and rp.at_bound["ks"].startswith("upper")
+    assert np.all(rp.params["ks"] <= 1.0) and np.isclose(rp.params["ks"], 1.0).any()
