@@ -72,9 +72,8 @@ class ParameterSpace:
     values: np.ndarray
     order: tuple[tuple[Lobe, ...], ...]
     physical: bool = False
-    #: Names given in ``bounds=`` and ``fixed=`` (for messages).
+    #: Names given in ``bounds=`` (for messages).
     overridden: frozenset[str] = frozenset()
-    fixed_names: frozenset[str] = frozenset()
 
     # -- construction -----------------------------------------------------------------------------
     @classmethod
@@ -120,7 +119,7 @@ class ParameterSpace:
                 raise UsageError(f"fixed value for {name!r}: {value!r} outside its bounds [{a[0]:g}, {b[0]:g}]")
             lo[s] = hi[s] = values[s] = v
             free[s] = False
-        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds), frozenset(fixed))
+        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds))
         return dataclasses.replace(space, order=space._interchangeable_groups())
 
     def _interchangeable_groups(self) -> tuple[tuple[Lobe, ...], ...]:

@@ -10,7 +10,7 @@ Parameters
 name  channels  bounds             physical    default  role       meaning
 ====  ========  =================  ==========  =======  =========  ==========================================
 kd    3         [0, inf)           [0, 1]      0.1      albedo     diffuse albedo (linear)
-ks    3         [0, inf)           [0, 3.2e7]  1        albedo     specular scale, the paper's constant b
+ks    3         [0, inf)           [0, 1e5]    1        albedo     specular scale, the paper's constant b
                                                                    (linear; not normalised, see below)
 m     1         [1e-4, inf) (log)  [1e-4, 1]   0.2      roughness  width of the facet-angle Gaussian, radians
 f0    1         [0, 1]             [0, 1]      0.04     fresnel    Schlick reflectance at normal incidence
@@ -18,9 +18,10 @@ f0    1         [0, 1]             [0, 1]      0.04     fresnel    Schlick refle
 
 Bounds (what the formula needs): kd, ks >= 0, no upper bound; m > 0, floored at 1e-4, no upper
 bound (a wide Gaussian is finite); f0 in [0, 1]. Physical range (``physical=True``): kd <= 1;
-m <= 1 radian; ks <= 3.2e7: energy conservation asks ks F pi m^2 <= 1 (see below), which couples
-ks with m and is no box; the physical box holds every ks that allows at m >= 1e-4
-(1/(pi 1e-8) = 3.18e7).
+m <= 1 radian; ks <= 1e5: energy conservation asks ks F pi m^2 <= 1 (see below), which couples
+ks with m and is no box; 1e5 is that limit at m = 1.8e-3 (a lobe 0.3 degrees wide at half maximum, far below
+what any sample spacing resolves: ``fit`` warns about such lobes), so a larger ks is not
+plausible.
 
 Formula (SPEC 4, the paper's form)::
 
@@ -52,7 +53,7 @@ from .cook_torrance import microfacet_lobe
 
 PARAMS = (
     Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
-    Param("ks", 3, 0.0, INF, 1.0, "albedo", linear=True, scale="linear", doc="specular scale (paper's b)", physical=(0.0, 3.2e7)),
+    Param("ks", 3, 0.0, INF, 1.0, "albedo", linear=True, scale="linear", doc="specular scale (paper's b)", physical=(0.0, 1e5)),
     Param("m", 1, 1e-4, INF, 0.2, "roughness", doc="Gaussian width of facet angles, radians", physical=(1e-4, 1.0)),
     Param("f0", 1, 0.0, 1.0, 0.04, "fresnel", doc="Schlick reflectance at normal incidence"),
 )
