@@ -19,9 +19,9 @@ f0    1         [0, 1]             [0, 1]      0.04     fresnel    Schlick refle
 Bounds (what the formula needs): kd, ks >= 0, no upper bound; m > 0, floored at 1e-4, no upper
 bound (a wide Gaussian is finite); f0 in [0, 1]. Physical range (``physical=True``): kd <= 1;
 m <= 1 radian; ks <= 1e5: energy conservation asks ks F pi m^2 <= 1 (see below), which couples
-ks with m and is no box; 1e5 is that limit at m = 1.8e-3 (a lobe 0.3 degrees wide at half maximum, far below
-what any sample spacing resolves: ``fit`` warns about such lobes), so a larger ks is not
-plausible.
+ks with m and is no box; 1e5 is that limit at m = 1.8e-3 (a lobe 0.3 degrees wide at half
+maximum, far below what any sample spacing resolves: ``fit`` warns about such lobes), so a
+larger ks is not plausible.
 
 Formula (SPEC 4, the paper's form)::
 
