@@ -286,8 +286,8 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
             if 2.0 * hw < spacing:
                 out.append(
                     f"{_lobe_label(lobe)} is narrower than the sample spacing (width {math.degrees(2 * hw):.2g} degrees "
-                    f"at half maximum, samples {math.degrees(spacing):.3g} degrees apart): its width is not measured, "
-                    "only its peak."
+                    f"at half maximum, samples {math.degrees(spacing):.3g} degrees apart): the samples see "
+                    "little more than its peak, so its width and scale are poorly determined."
                 )
     free_names = {name for name, s in _slices(space.model) if space.free[s].any()}
     for name in space.model.param_names:
