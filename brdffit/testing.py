@@ -43,12 +43,26 @@ def extreme_pairs() -> tuple[np.ndarray, np.ndarray]:
     return wi, wo
 
 
+#: Where a parameter's bound is infinite, it is also stressed at this multiple of the finite end
+#: of its ``Param.finite_range`` (e.g. a roughness of 1e3, an exponent of 1e7): far beyond any
+#: plausible value, the values a free solver step can reach.
+BEYOND_FACTOR = 1e3
+
+
 def stress_parameter_sets(model: Model) -> list[dict[str, float]]:
-    """Defaults, all-lower, all-upper, and each parameter alone at its lower and upper bound."""
+    """Defaults, all-lower, all-upper, and each parameter alone at its lower and upper end.
+
+    The ends are ``Param.finite_range``: the bounds, or the physical range on a side where the
+    bound is infinite; such a parameter is also stressed at ``BEYOND_FACTOR`` times that end.
+    """
     base = {p.name: p.default for p in model.params}
-    sets = [dict(base), {p.name: p.lower for p in model.params}, {p.name: p.upper for p in model.params}]
+    lo = {p.name: p.finite_range[0] for p in model.params}
+    hi = {p.name: p.finite_range[1] for p in model.params}
+    sets = [dict(base), dict(lo), dict(hi)]
     for p in model.params:
-        sets += [dict(base, **{p.name: p.lower}), dict(base, **{p.name: p.upper})]
+        sets += [dict(base, **{p.name: lo[p.name]}), dict(base, **{p.name: hi[p.name]})]
+        if p.upper == float("inf"):
+            sets.append(dict(base, **{p.name: BEYOND_FACTOR * max(hi[p.name], 1.0)}))
     return sets
 
 

@@ -28,10 +28,12 @@ def param_strategy(model):
     """Each parameter anywhere in its box (bounds included; log axes drawn log-uniformly)."""
 
     def one(p):
+        # Param.finite_range: the bounds, or the physical range on a side where a bound is infinite.
+        lo, hi = p.finite_range
         if p.scale == "log":
-            a, b = np.log(p.lower), np.log(p.upper)
-            return st.floats(a, b).map(lambda y, p=p: float(np.clip(np.exp(y), p.lower, p.upper)))
-        return st.floats(p.lower, p.upper)
+            a, b = np.log(lo), np.log(hi)
+            return st.floats(a, b).map(lambda y, lo=lo, hi=hi: float(np.clip(np.exp(y), lo, hi)))
+        return st.floats(lo, hi)
 
     return st.fixed_dictionaries({p.name: one(p) for p in model.params})
 

@@ -107,8 +107,9 @@ def _affine_defect(model, base, names_, rng, wi, wo):
     def f(q):
         return np.asarray(model.eval(q, wi, wo))
 
-    lam0 = {k: np.full_like(base[k], model.param(k).lower) for k in names_}
-    step = {k: 0.5 * (model.param(k).upper - model.param(k).lower) for k in names_}
+    # Param.finite_range: the bounds, the physical range where a bound is infinite (ks, kd, ...).
+    lam0 = {k: np.full_like(base[k], model.param(k).finite_range[0]) for k in names_}
+    step = {k: 0.5 * (model.param(k).finite_range[1] - model.param(k).finite_range[0]) for k in names_}
     ref = dict(base, **lam0)
     f0 = f(ref)
     lam = {k: lam0[k] + rng.uniform(0.1, 0.4, base[k].shape) * 2 * step[k] for k in names_}
@@ -141,11 +142,14 @@ def test_linear_flags_are_exact_and_maximal(name):
 def test_unconstrained_roundtrip_and_samples_in_bounds(name):
     model = get(name)
     lo, hi = model.bounds()
+    assert np.all(lo < np.inf) and np.all(hi > -np.inf)
     for key in jax.random.split(jax.random.key(0), 4):
         p = model.sample(key)
         v = np.asarray(model.flatten(p))
         assert np.all((lo <= v) & (v <= hi))
         back = model.flatten(model.from_unconstrained(model.to_unconstrained(p)))
         np.testing.assert_allclose(back, v, rtol=1e-9, atol=1e-12)
-    corner = model.unflatten(lo)
-    np.testing.assert_allclose(model.flatten(model.from_unconstrained(model.to_unconstrained(corner))), lo, atol=1e-12)
+    # The corner of the finite box (the physical range standing in for an infinite bound).
+    flo = np.concatenate([np.full(model.size(p), p.finite_range[0]) for p in model.params])
+    corner = model.unflatten(flo)
+    np.testing.assert_allclose(model.flatten(model.from_unconstrained(model.to_unconstrained(corner))), flo, atol=1e-12)

@@ -16,6 +16,36 @@ import numpy as np
 from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
 
+def parse_assignments(option: str, items, expect_pair: bool) -> dict:
+    """``--bound NAME=LO,HI`` (either side may be empty: keep it) / ``--fix NAME=V[,V,V]`` ->
+    dict for ``fit(bounds=..., fixed=...)``; a malformed item is a usage error (exit 2)."""
+    from ..errors import UsageError
+
+    out = {}
+    for item in items:
+        name, eq, text = item.partition("=")
+        name = name.strip()
+        if not eq or not name or not text.strip():
+            form = "NAME=LO,HI" if expect_pair else "NAME=VALUE"
+            raise UsageError(f"{option} {item!r}: expected {form}")
+        parts = [t.strip() for t in text.split(",")]
+        if expect_pair and len(parts) != 2:
+            raise UsageError(f"{option} {item!r}: expected two numbers LO,HI (an empty side keeps that bound)")
+        values = []
+        for t in parts:
+            if expect_pair and t == "":
+                values.append(None)
+                continue
+            try:
+                values.append(float(t))
+            except ValueError:
+                raise UsageError(f"{option} {item!r}: {t!r} is not a number") from None
+        if name in out:
+            raise UsageError(f"{option}: {name!r} given twice")
+        out[name] = tuple(values) if expect_pair else (values[0] if len(values) == 1 else values)
+    return out
+
+
 def plot_fit(measurement, result, path: Path) -> None:
     import matplotlib
 
@@ -83,9 +113,15 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
               help="Further grid starts solved beside the best one [default: the API's: 0, or 3 for a composite "
                    "with repeated lobes].")
 @click.option("--max-steps", type=click.IntRange(min=1), default=_MAX_STEPS, show_default=True)
+@click.option("--bound", "bound_items", multiple=True, metavar="NAME=LO,HI",
+              help="Narrow a parameter's box, e.g. ggx1.alpha=0.01,0.5 (an empty side keeps it). Repeatable.")
+@click.option("--fix", "fix_items", multiple=True, metavar="NAME=VALUE",
+              help="Hold a parameter at a value (or one per channel: kd=0.1,0.2,0.3). Repeatable.")
+@click.option("--physical", is_flag=True, help="Keep parameters in their plausible ranges (albedo <= 1, ...).")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
-def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
+def fit_command(source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
+                force) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from contextlib import nullcontext
 
@@ -102,6 +138,13 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
     check_loss(loss)
     check_solver(solver)
     check_model(model)  # unknown or impossible model -> usage error before any work
+    from ..fitting.problem import resolve_model
+    from ..fitting.space import ParameterSpace
+
+    bounds = parse_assignments("--bound", bound_items, expect_pair=True)
+    fixed = parse_assignments("--fix", fix_items, expect_pair=False)
+    # unknown parameter names or values -> usage error before any work
+    ParameterSpace.build(resolve_model(model, 3), bounds, fixed, physical)
     console = Console(stderr=True)
     # Progress only for a person at a terminal (stderr a TTY): reading, compiling, initialising,
     # solving, writing. (Per-step progress from inside the compiled solve would need a host
@@ -120,12 +163,15 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
             if live:
                 status.update(f"{model} on {m.name}: {text}")
 
-        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress)
+        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress,
+                bounds=bounds, fixed=fixed, physical=physical)
         progress("writing fit.json, fit.png")
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
             plot_fit(m, r, tmp / "fit.png")
     console.print(repr(r), soft_wrap=True)
+    for line in r.warnings:  # one line each, on stderr with the rest of the report
+        console.print(f"warning: {line}", soft_wrap=True, markup=False, highlight=False)
     console.print(f"wrote {out}/fit.json, {out}/fit.png")
     if not r.converged:
         console.print(f"[bold red]not converged[/]: {r.status}")

@@ -16,6 +16,7 @@ from . import init as _init
 from .losses import check_loss
 from .problem import Data, flat_residual, loss_values, prepare, resolve_model
 from .result import FitResult
+from .space import ParameterSpace, fit_warnings, sample_spacing
 from .solve import compiled
 from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_optx, solve_scipy
 
@@ -115,12 +116,22 @@ def default_starts(model: Model) -> int:
     return COMPOSITE_STARTS if len(kinds) != len(set(kinds)) else 1
 
 
-def parameter_space(model: Model):
-    """Flat lower / upper bounds (may be infinite) and the free mask of ``model``."""
-    # parameter space (h-params replaces this)
-    lo, hi = model.bounds()
-    free = np.ones(model.n_free, bool)
-    return np.asarray(lo, float), np.asarray(hi, float), free
+def parameter_space(model: Model, bounds=None, fixed=None, physical: bool = False) -> ParameterSpace:
+    """Where a fit of ``model`` may move (``brdffit.fitting.space``): flat ``lo``/``hi`` (may be
+    infinite) and ``free`` mask, the runtime arguments of the init and of every solver."""
+    return ParameterSpace.build(model, bounds, fixed, physical)
+
+
+def space_options(bounds, fixed, physical) -> dict:
+    """The parameter-space arguments as JSON-ready options (only those given)."""
+    out = {}
+    if bounds:
+        out["bounds"] = {k: [None if b is None else float(b) for b in v] for k, v in bounds.items()}
+    if fixed:
+        out["fixed"] = {k: np.asarray(v, dtype=np.float64).reshape(-1).tolist() for k, v in fixed.items()}
+    if physical:
+        out["physical"] = True
+    return out
 
 
 def _quiet(_message: str) -> None:
@@ -141,6 +152,9 @@ def fit(
     weights=None,
     scipy_jac: str = "exact",
     progress: Callable[[str], None] | None = None,
+    bounds: Mapping[str, tuple] | None = None,
+    fixed: Mapping[str, object] | None = None,
+    physical: bool = False,
 ) -> FitResult:
     """Fit ``model`` to ``measurement``.
 
@@ -152,6 +166,11 @@ def fit(
     (see ``solve.BoundedLevenbergMarquardt``); atol: absolute floor on the loss, 0 = none.
     progress: called with a short text at each phase (initialising, compiling, solving, solved).
     Non-convergence is reported in ``.status``, never raised; parameters are never NaN.
+
+    Parameter space (``brdffit.fitting.space``): the model's bounds (only what its formula needs),
+    ``physical=True`` for its plausible ranges, ``bounds={"name": (lo, hi)}`` to narrow a box
+    (None on a side keeps it), ``fixed={"name": value}`` to hold a parameter. Lobes of one kind
+    come out narrowest first. ``.at_bound`` and ``.warnings`` report what the constraints decided.
     """
     note = progress or _quiet
     loss = check_loss(loss)
@@ -163,8 +182,9 @@ def fit(
     prep = prepare(measurement, weights)
     m = resolve_model(model, prep.channels)
     data = prep.data
-    lo, hi, free = parameter_space(m)
-    anchor = _start_from("defaults" if init is None else init, m, lo, hi)
+    space = parameter_space(m, bounds, fixed, physical)
+    lo, hi, free = space.lo, space.hi, space.free
+    anchor = space.clip(_start_from("defaults" if init is None else init, m, lo, hi))
     n_starts = 1 + (default_starts(m) - 1 if multistart is None else int(multistart))
     if solver == "scipy":
         n_starts = 1 if multistart is None else n_starts
@@ -201,15 +221,19 @@ def fit(
         run_s += r_s
     v0 = starts[i_best]
     note(f"solved: {steps} steps, loss {value:.6g}, {STATUS_TEXT[code]}")
-    return _result(m, loss, solver, measurement.name, prep, v, value, code, steps, v0, lo, hi, free,
+    # Fixed entries exactly at their values; lobes of one kind narrowest first.
+    v = space.canonical(space.clip(v))
+    return _result(space, loss, solver, measurement, prep, v, value, code, steps, v0,
                    seconds={"compile": compile_s, "run": run_s, "init": init_s},
                    options={"max_steps": max_steps, "rtol": rtol, "atol": atol,
                             "multistart": None if multistart is None else int(multistart),
-                            "starts": int(len(starts)), "init": "grid" if init is None else "given"})
+                            "starts": int(len(starts)), "init": "grid" if init is None else "given",
+                            **space_options(bounds, fixed, physical)})
 
 
-def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free, *, seconds, options,
-            metrics=None, jtj=None) -> FitResult:
+def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep, v, value, code, steps, v0, *,
+            seconds, options, metrics=None, jtj=None) -> FitResult:
+    m, lo, hi, free, name = space.model, space.lo, space.hi, space.free, measurement.name
     params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
     if metrics is None or jtj is None:
         # Through the disk cache, like the solve (a second process traces nothing).
@@ -219,6 +243,9 @@ def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
+    at_bound = space.at_bound(v)
+    wo = np.asarray(measurement.wo)[np.asarray(measurement.valid_mask(), dtype=bool)]
+    warnings = fit_warnings(space, v, at_bound, stderr, sample_spacing(wo))
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:
         status = "converged (scipy least_squares)"
@@ -240,4 +267,6 @@ def _result(m, loss, solver, name, prep, v, value, code, steps, v0, lo, hi, free
         stderr=stderr,
         start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
         options=options,
+        at_bound=at_bound,
+        warnings=tuple(warnings),
     )

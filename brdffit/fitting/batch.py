@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import UsageError
 from ..measurement import Measurement
 from . import init as _init
-from .api import DEFAULT_LOSS, DEFAULT_SOLVER, _result, default_starts, normal_matrix_fn, parameter_space
+from .api import DEFAULT_LOSS, DEFAULT_SOLVER, _result, default_starts, normal_matrix_fn, parameter_space, space_options
 from .losses import check_loss
 from .problem import Data, loss_values, prepare, resolve_model
 from .result import FitResult
@@ -96,11 +96,15 @@ def fit_batch(
     multistart: int | None = None,
     progress: bool = False,
     lanes: int = 1,
+    bounds=None,
+    fixed=None,
+    physical: bool = False,
 ) -> list[FitResult]:
     """Fit ``model`` to each measurement independently; see the module docstring.
 
     Same defaults as ``fit`` (loss, solver, starts, tolerances). ``progress=True`` shows a
-    progress bar (rich, on stderr) over the fits."""
+    progress bar (rich, on stderr) over the fits. ``bounds``, ``fixed``, ``physical``: the
+    parameter space, as for ``fit``."""
     loss = check_loss(loss)
     solver = check_solver(solver)
     if solver == "scipy":
@@ -115,8 +119,9 @@ def fit_batch(
         raise UsageError(f"fit_batch: all measurements need the same samples and channels, got {sorted(shapes)}")
     preps = [prepare(m) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
-    lo, hi, free = parameter_space(mdl)
-    anchor = np.clip(np.asarray(mdl.flatten(mdl.defaults())), lo, hi)
+    pspace = parameter_space(mdl, bounds, fixed, physical)
+    lo, hi, free = pspace.lo, pspace.hi, pspace.free
+    anchor = pspace.clip(np.asarray(mdl.flatten(mdl.defaults())))
     k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
     data = Data(*(np.stack([np.asarray(p.data[i]) for p in preps]) for i in range(6)))
     n = len(measurements)
@@ -182,6 +187,9 @@ def fit_batch(
         if bar is not None:
             bar.stop()
 
+    # Fixed entries exactly at their values, lobes of one kind narrowest first (a swap of whole
+    # interchangeable lobes: f_r and the loss are unchanged), before metrics and J^T J.
+    out = [(pspace.canonical(pspace.clip(o[0])), *o[1:]) for o in out]
     # Metrics and J^T J (for the standard errors) of every fit, chunk by chunk in one call each.
     post = _post(mdl, loss)
     v_all = np.stack([o[0] for o in out])
@@ -202,10 +210,10 @@ def fit_batch(
     for i, (m, prep) in enumerate(zip(measurements, preps)):
         v, value, code, steps, v0 = out[i]
         results.append(_result(
-            mdl, loss, solver, m.name, prep, v, value, code, steps, v0, lo, hi, free,
+            pspace, loss, solver, m, prep, v, value, code, steps, v0,
             metrics={k: float(x[i]) for k, x in metrics_all.items()}, jtj=jtj_all[i],
             seconds={"compile": compile_s / n, "run": float(secs[i] + init_s / n), "init": init_s / n},
             options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": chunk,
-                     "starts": k, "multistart": multistart},
+                     "starts": k, "multistart": multistart, **space_options(bounds, fixed, physical)},
         ))
     return results

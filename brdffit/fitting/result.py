@@ -46,6 +46,12 @@ class FitResult:
     stderr: dict[str, np.ndarray | None] = dataclasses.field(default_factory=dict)
     start: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     options: dict[str, Any] = dataclasses.field(default_factory=dict)
+    #: Parameters that ended on a bound of the fit's space: name -> "lower" / "upper", or per
+    #: channel ("lower in channel 0"). Fixed parameters are not listed.
+    at_bound: dict[str, str] = dataclasses.field(default_factory=dict)
+    #: One sentence each: a parameter on a bound, a lobe narrower than the sample spacing, a
+    #: parameter the data do not determine (``brdffit.fitting.space.fit_warnings``).
+    warnings: tuple[str, ...] = ()
 
     @property
     def model_name(self) -> str:
@@ -94,6 +100,8 @@ class FitResult:
             "stderr": {k: (None if v is None else _floats(v)) for k, v in self.stderr.items()},
             "start": {k: _floats(v) for k, v in self.start.items()},
             "options": self.options,
+            "at_bound": dict(self.at_bound),
+            "warnings": list(self.warnings),
             "citation": self.model.citation,
         }
 
@@ -146,6 +154,9 @@ class FitResult:
             stderr={k: (None if v is None else np.asarray(v, dtype=np.float64)) for k, v in d.get("stderr", {}).items()},
             start={k: np.asarray(v, dtype=np.float64) for k, v in d.get("start", {}).items()},
             options=dict(d.get("options", {})),
+            # Absent from fit.json files written before they existed: none recorded.
+            at_bound={str(k): str(v) for k, v in (d.get("at_bound") or {}).items()},
+            warnings=tuple(str(w) for w in (d.get("warnings") or ())),
         )
 
     def __repr__(self) -> str:

@@ -4,15 +4,20 @@ M. Ashikhmin, P. Shirley, "An Anisotropic Phong BRDF Model", Journal of Graphics
 
 Parameters
 ----------
-=====  ========  ================  =======  ========  =============================================
-name   channels  bounds            default  role      meaning
-=====  ========  ================  =======  ========  =============================================
-rd     3         [0, 1]            0.1      albedo    diffuse reflectance R_d (linear)
-rs     3         [0, 1]            0.3      fresnel   specular reflectance R_s at normal incidence
-                                                      (enters the diffuse term too: not linear)
-nu     1         [1, 1e4] (log)    100      exponent  Phong exponent along the tangent x
-nv     1         [1, 1e4] (log)    100      exponent  Phong exponent along the bitangent y
-=====  ========  ================  =======  ========  =============================================
+====  ========  ==============  ========  =======  ========  ============================================
+name  channels  bounds          physical  default  role      meaning
+====  ========  ==============  ========  =======  ========  ============================================
+rd    3         [0, inf)        [0, 1]    0.1      albedo    diffuse reflectance R_d (linear)
+rs    3         [0, 1]          [0, 1]    0.3      fresnel   specular reflectance R_s at normal incidence
+                                                             (enters the diffuse term too: not linear)
+nu    1         [1, inf) (log)  [1, 1e4]  100      exponent  Phong exponent along the tangent x
+nv    1         [1, inf) (log)  [1, 1e4]  100      exponent  Phong exponent along the bitangent y
+====  ========  ==============  ========  =======  ========  ============================================
+
+Bounds (what the formula needs): rd >= 0, no upper bound (arbitrary units); rs in [0, 1] (the
+diffuse term carries 1 - rs, negative beyond 1); nu, nv >= 1 (as for ``phong``), no upper bound.
+Physical range (``physical=True``): rd <= 1 (with rs <= 1 the model conserves energy by
+construction, the paper's coupling of the two terms); nu, nv <= 1e4.
 
 Formula (paper eqs. 4, 5)::
 
@@ -31,16 +36,20 @@ by (nu + nv)/2, any value being exact there since (n.h)^e = 1. Reciprocal.
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("rd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse reflectance"),
+    Param("rd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse reflectance", physical=(0.0, 1.0)),
     Param("rs", 3, 0.0, 1.0, 0.3, "fresnel", doc="specular reflectance at normal incidence"),
-    Param("nu", 1, 1.0, 1e4, 100.0, "exponent", doc="exponent along x"),
-    Param("nv", 1, 1.0, 1e4, 100.0, "exponent", doc="exponent along y"),
+    Param("nu", 1, 1.0, INF, 100.0, "exponent", doc="exponent along x", physical=(1.0, 1e4)),
+    Param("nv", 1, 1.0, INF, 100.0, "exponent", doc="exponent along y", physical=(1.0, 1e4)),
 )
 
 
@@ -60,6 +69,12 @@ def formula(p, wi, wo):
     return spec + diff
 
 
+def halfwidth(p):
+    """(n.h)^e = 1/2 at th_h = acos(2^(-1/e)) along the narrower axis (e = max(nu, nv)); twice
+    that in reflected directions."""
+    return 2.0 * math.acos(2.0 ** (-1.0 / max(p["nu"], p["nv"])))
+
+
 MODEL = Model(
     name="ashikhmin_shirley",
     params=PARAMS,
@@ -67,4 +82,5 @@ MODEL = Model(
     citation="M. Ashikhmin, P. Shirley, An Anisotropic Phong BRDF Model, Journal of Graphics Tools 5(2), 2000",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -5,17 +5,35 @@ implements; the registry (``brdffit.models``) finds it. Parameter values travel 
 ``name -> array of shape (size,)`` where ``size`` is 1, or the number of colour channels for a
 parameter declared with ``channels=3``.
 
+Bounds and physical ranges (SPEC 5, "Parameter space")
+------------------------------------------------------
+Every parameter declares two ranges:
+
+* its **bounds** ``[lower, upper]``: only what the formula needs (scales non-negative, roughness and
+  exponents positive, f0 in [0, 1]). A side the formula leaves open is infinite (``math.inf``):
+  measured data are often in arbitrary units, or need more than a plausible value. A fit never
+  leaves the bounds, and ``bounds=`` overrides may only narrow them.
+* its **physical range** ``physical=(lo, hi)``: a finite, plausible range inside the bounds
+  (albedo <= 1, energy conservation where the model has a simple criterion, roughness <= 1, ...),
+  applied by ``fit(..., physical=True)``.
+
+Where a bound is infinite, code that needs a finite box -- random parameters (``Model.sample``),
+the stress checks of ``brdffit.testing``, the start grid -- uses the physical range on that side
+(``Param.finite_range``).
+
 Unconstrained vector (what a solver sees)
 -----------------------------------------
 ``model.to_unconstrained(params)`` / ``model.from_unconstrained(x)`` map between the params dict and
 a flat vector. Each parameter lives in its box [lower, upper], on a linear axis, or on a log axis
-(``scale="log"``, automatic for positive bounds spanning >= 2 decades: roughness, exponents) so
-that the solver's steps are relative. The map from R to the box is a *fold* (a triangle wave:
-reflect at each bound), not a sigmoid: a sigmoid's derivative vanishes towards the bounds, and a
+(``scale="log"``, automatic for a positive lower bound with an upper bound >= 100 times larger or
+infinite: roughness, exponents) so that the solver's steps are relative. The map from R to the box
+is a *fold* (a triangle wave: reflect at each finite bound; one reflection for a one-sided box,
+the identity for R), not a sigmoid: a sigmoid's derivative vanishes towards the bounds, and a
 solver whose optimum lies at a bound (kd = 0 for a metal, f0 = 1) crawls there. The fold has slope
 +-1 everywhere, so the bound is reached in one step and left again if the data want. On the box
 itself the two maps are exact inverses (a bijection box <-> box); outside it the solver's iterate
-is folded back, so the model never sees a parameter out of bounds.
+is folded back, so the model never sees a parameter out of bounds. Both maps take optional flat
+``lo, hi`` arrays (a ``ParameterSpace``'s, with overrides) in place of the declared bounds.
 """
 
 from __future__ import annotations
@@ -34,14 +52,34 @@ Params = Mapping[str, Array]
 Formula = Callable[[Params, Array, Array], Array]
 
 
+def _fold(x, a, b):
+    """Fold x in R onto [a, b] with slope +-1 everywhere (also exactly at the bounds).
+
+    a, b may be infinite: one finite side is a single reflection, none the identity. Works on
+    arrays of bounds (one per element) as well as on scalars.
+    """
+    a_fin, b_fin = jnp.isfinite(a), jnp.isfinite(b)
+    a0 = jnp.where(a_fin, a, 0.0)
+    b0 = jnp.where(b_fin, b, 0.0)
+    width = jnp.where(a_fin & b_fin, b0 - a0, 1.0)
+    both = width > 0
+    safe_width = jnp.where(both, width, 1.0)
+    y = jnp.mod(x - a0, 2 * safe_width)
+    boxed = a0 + jnp.where(y <= safe_width, y, 2 * safe_width - y)
+    boxed = jnp.where(both, boxed, a0)  # a zero-width box (lo == hi): the value itself
+    lower_only = a0 + jnp.where(x >= a0, x - a0, a0 - x)
+    upper_only = b0 - jnp.where(x <= b0, b0 - x, x - b0)
+    return jnp.where(a_fin & b_fin, boxed, jnp.where(a_fin, lower_only, jnp.where(b_fin, upper_only, x)))
+
+
 @dataclasses.dataclass(frozen=True)
 class Param:
-    """One declared parameter of a model."""
+    """One declared parameter of a model (see the module docstring for bounds and physical range)."""
 
     name: str
     channels: int  # 1, or 3 = one value per colour channel of the model
-    lower: float
-    upper: float
+    lower: float  # bound the formula needs (may be -inf)
+    upper: float  # bound the formula needs (may be inf)
     default: float
     role: str  # albedo | roughness | exponent | fresnel | shape | anisotropy
     #: The model is linear (and increasing) in this parameter: initialisation solves it by
@@ -55,42 +93,75 @@ class Param:
     #: "linear" or "log": the axis the solver moves on (see module docstring).
     scale: str = "auto"
     doc: str = ""
+    #: Plausible range (finite, inside the bounds), applied with ``fit(..., physical=True)``.
+    #: None: the bounds themselves (allowed only where both are finite).
+    physical: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.channels not in (1, 3):
             raise ValueError(f"{self.name}: channels must be 1 or 3")
-        if not (self.lower <= self.default <= self.upper):
+        if not (self.lower <= self.default <= self.upper) or math.isnan(self.default):
             raise ValueError(f"{self.name}: default {self.default} outside [{self.lower}, {self.upper}]")
+        physical = self.physical
+        if physical is None:
+            physical = (self.lower, self.upper)
+        physical = (float(physical[0]), float(physical[1]))
+        if not all(math.isfinite(v) for v in physical):
+            raise ValueError(f"{self.name}: a physical range must be finite (an infinite bound needs one)")
+        if not (self.lower <= physical[0] <= self.default <= physical[1] <= self.upper):
+            raise ValueError(
+                f"{self.name}: physical range {physical} must lie inside the bounds "
+                f"[{self.lower}, {self.upper}] and hold the default {self.default}"
+            )
+        object.__setattr__(self, "physical", physical)
         if self.scale == "auto":
             log = self.lower > 0 and self.upper / self.lower >= 100.0
             object.__setattr__(self, "scale", "log" if log else "linear")
         if self.scale not in ("linear", "log"):
             raise ValueError(f"{self.name}: scale must be 'linear' or 'log'")
+        if self.scale == "log" and not self.lower > 0:
+            raise ValueError(f"{self.name}: a log axis needs a positive lower bound")
 
     def renamed(self, name: str) -> "Param":
         return dataclasses.replace(self, name=name)
 
-    # axis used by the solver -------------------------------------------------------------------
-    def _axis_bounds(self) -> tuple[float, float]:
-        if self.scale == "log":
-            return math.log(self.lower), math.log(self.upper)
-        return self.lower, self.upper
+    @property
+    def finite_range(self) -> tuple[float, float]:
+        """The bounds, with the physical range standing in on an infinite side: the box that
+        random parameters, stress checks and the start grid use."""
+        lo = self.lower if math.isfinite(self.lower) else self.physical[0]
+        hi = self.upper if math.isfinite(self.upper) else self.physical[1]
+        return lo, hi
 
-    def to_axis(self, value):
-        value = jnp.clip(value, self.lower, self.upper)
+    # axis used by the solver -------------------------------------------------------------------
+    def _axis_bounds(self, lower=None, upper=None):
+        """The box [lower, upper] (declared bounds unless given) on this parameter's axis."""
+        lower = self.lower if lower is None else lower
+        upper = self.upper if upper is None else upper
+        if self.scale == "log":
+            return jnp.log(lower), jnp.log(upper)
+        return lower, upper
+
+    def to_axis(self, value, lower=None, upper=None):
+        lower = self.lower if lower is None else lower
+        upper = self.upper if upper is None else upper
+        value = jnp.clip(value, lower, upper)
         return jnp.log(value) if self.scale == "log" else value
 
-    def from_axis(self, x):
-        a, b = self._axis_bounds()
-        width = b - a
-        if width == 0:
-            t = jnp.zeros_like(x)
-        else:
-            # Fold R onto [a, b] with slope +-1 everywhere (also exactly at the bounds).
-            y = jnp.mod(x - a, 2 * width)
-            t = jnp.where(y <= width, y, 2 * width - y)
-        y = a + t
+    def from_axis(self, x, lower=None, upper=None):
+        a, b = self._axis_bounds(lower, upper)
+        y = _fold(x, a, b)
         return jnp.exp(y) if self.scale == "log" else y
+
+
+@dataclasses.dataclass(frozen=True)
+class Lobe:
+    """One specular lobe of a model: its kind (the model that defines it) and its parameters, by
+    flat name, in the kind's order. Two lobes of one kind are interchangeable: swapping all their
+    parameters leaves f_r unchanged (``brdffit.models.compose`` orders them)."""
+
+    kind: str
+    params: tuple[str, ...]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,6 +184,23 @@ class Model:
     doc: str = ""
     #: Component models of a composite ("lambert+ggx"), empty for a base model.
     components: tuple[Any, ...] = ()
+    #: The model's specular lobes. None (the default): one lobe of kind ``name`` made of every
+    #: parameter but the diffuse ``kd`` (none for a model with no other parameter).
+    lobes: tuple[Lobe, ...] | None = None
+    #: ``halfwidth(params) -> radians``: half width at half maximum of the model's lobe, measured
+    #: in reflected directions (about twice the half-vector angle for a microfacet lobe), from the
+    #: lobe's parameters by their base names (floats). None where the model has no specular lobe.
+    #: Used to warn about lobes narrower than the sample spacing (``brdffit.fitting.space``).
+    halfwidth: Callable[[Mapping[str, float]], float] | None = None
+
+    def __post_init__(self):
+        if self.lobes is None:
+            own = tuple(p.name for p in self.params if p.name != "kd")
+            object.__setattr__(self, "lobes", (Lobe(self.name, own),) if own else ())
+        known = set(self.param_names)
+        for lobe in self.lobes:
+            if not set(lobe.params) <= known:
+                raise ValueError(f"model {self.name!r}: lobe {lobe} names unknown parameters")
 
     # -- parameter table ------------------------------------------------------------------------
     def param(self, name: str) -> Param:
@@ -172,17 +260,27 @@ class Model:
         return jnp.broadcast_to(f, (wi.shape[0], self.channels))
 
     # -- solver's view ------------------------------------------------------------------------------
-    def to_unconstrained(self, params: Params) -> Float[Array, " P"]:
-        params = self.check_params(params)
-        return jnp.concatenate([p.to_axis(params[p.name]) for p in self.params])
-
-    def from_unconstrained(self, x: Float[Array, " P"]) -> dict[str, Array]:
-        out, i = {}, 0
+    def _slices(self):
+        i = 0
         for p in self.params:
             n = self.size(p)
-            out[p.name] = p.from_axis(x[i : i + n])
+            yield p, slice(i, i + n)
             i += n
-        return out
+
+    def to_unconstrained(self, params: Params, lo=None, hi=None) -> Float[Array, " P"]:
+        """Params -> the solver's axes; ``lo, hi``: flat bounds (default: the declared ones)."""
+        params = self.check_params(params)
+        return jnp.concatenate([
+            p.to_axis(params[p.name], None if lo is None else lo[s], None if hi is None else hi[s])
+            for p, s in self._slices()
+        ])
+
+    def from_unconstrained(self, x: Float[Array, " P"], lo=None, hi=None) -> dict[str, Array]:
+        """The solver's axes -> params, folded into the box (declared bounds or flat ``lo, hi``)."""
+        return {
+            p.name: p.from_axis(x[s], None if lo is None else lo[s], None if hi is None else hi[s])
+            for p, s in self._slices()
+        }
 
     def flatten(self, params: Params) -> Float[Array, " P"]:
         """Params dict -> flat vector of parameter values (not transformed)."""
@@ -197,21 +295,24 @@ class Model:
             i += n
         return out
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Flat lower and upper bounds, in the order of ``flatten``."""
-        lo = np.concatenate([np.full(self.size(p), p.lower) for p in self.params])
-        hi = np.concatenate([np.full(self.size(p), p.upper) for p in self.params])
+    def bounds(self, physical: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Flat lower and upper bounds in the order of ``flatten`` (may be infinite), or the
+        physical ranges (finite) with ``physical=True``."""
+        pick = (lambda p: p.physical) if physical else (lambda p: (p.lower, p.upper))
+        lo = np.concatenate([np.full(self.size(p), pick(p)[0], dtype=np.float64) for p in self.params])
+        hi = np.concatenate([np.full(self.size(p), pick(p)[1], dtype=np.float64) for p in self.params])
         return lo, hi
 
     def sample(self, key: jax.Array, margin: float = 0.0) -> dict[str, Array]:
-        """Random parameters inside the bounds (log-uniform on log axes).
+        """Random parameters inside ``Param.finite_range`` (the bounds, the physical range on a
+        side where the bound is infinite; log-uniform on log axes).
 
-        ``margin`` in [0, 0.5) keeps that fraction of each axis away from both bounds.
+        ``margin`` in [0, 0.5) keeps that fraction of each axis away from both ends.
         """
         out = {}
         keys = jax.random.split(key, len(self.params))
         for k, p in zip(keys, self.params):
-            a, b = p._axis_bounds()
+            a, b = p._axis_bounds(*p.finite_range)
             u = jax.random.uniform(k, (self.size(p),), minval=margin, maxval=1.0 - margin)
             y = a + (b - a) * u
             out[p.name] = jnp.exp(y) if p.scale == "log" else y
@@ -219,10 +320,26 @@ class Model:
 
     def table(self) -> str:
         """The parameter table as aligned text (for docs and ``brdffit info``)."""
-        rows = [("name", "channels", "lower", "upper", "default", "role", "linear")]
+        rows = [("name", "channels", "bounds", "physical", "default", "role", "linear")]
         rows += [
-            (p.name, str(p.channels), f"{p.lower:g}", f"{p.upper:g}", f"{p.default:g}", p.role, "yes" if p.linear else "")
+            (p.name, str(p.channels), format_range(p.lower, p.upper), format_range(*p.physical), f"{p.default:g}",
+             p.role, "yes" if p.linear else "")
             for p in self.params
         ]
         widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
         return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+
+
+def format_range(lo: float, hi: float) -> str:
+    """``[0, 1]``, ``[1e-4, inf)``: the notation of the model files' parameter tables."""
+
+    def num(v):
+        if v == math.pi / 2:
+            return "pi/2"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        if v != 0 and not 1e-2 <= abs(v) < 1e4:
+            return np.format_float_scientific(v, trim="-", exp_digits=1).replace("+", "")
+        return f"{v:g}"
+
+    return ("(" if math.isinf(lo) else "[") + f"{num(lo)}, {num(hi)}" + (")" if math.isinf(hi) else "]")

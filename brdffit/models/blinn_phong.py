@@ -6,13 +6,17 @@ Normalisation (n+8)/(8 pi): T. Akenine-Moeller, E. Haines, N. Hoffman, *Real-Tim
 
 Parameters
 ----------
-=====  ========  =================  =======  ========  ===========================================
-name   channels  bounds             default  role      meaning
-=====  ========  =================  =======  ========  ===========================================
-kd     3         [0, 1]             0.1      albedo    diffuse albedo (linear)
-ks     3         [0, 1]             0.5      albedo    specular albedo, approximately (linear)
-n      1         [1, 1e4] (log)     20       exponent  Blinn exponent
-=====  ========  =================  =======  ========  ===========================================
+====  ========  ==============  ========  =======  ========  =======================================
+name  channels  bounds          physical  default  role      meaning
+====  ========  ==============  ========  =======  ========  =======================================
+kd    3         [0, inf)        [0, 1]    0.1      albedo    diffuse albedo (linear)
+ks    3         [0, inf)        [0, 1]    0.5      albedo    specular albedo, approximately (linear)
+n     1         [1, inf) (log)  [1, 1e4]  20       exponent  Blinn exponent
+====  ========  ==============  ========  =======  ========  =======================================
+
+Bounds (what the formula needs): kd, ks >= 0, no upper bound (arbitrary units); n >= 1 (as for
+``phong``), no upper bound. Physical range (``physical=True``): kd <= 1, ks <= 1 (ks is about the
+specular albedo), n <= 1e4.
 
 BRDF form implemented::
 
@@ -32,15 +36,19 @@ of f_r. Note that a Blinn-Phong exponent is about 4x the Phong exponent of the s
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
-    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular albedo (approximately)"),
-    Param("n", 1, 1.0, 1e4, 20.0, "exponent", doc="Blinn exponent"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="specular albedo (approximately)", physical=(0.0, 1.0)),
+    Param("n", 1, 1.0, INF, 20.0, "exponent", doc="Blinn exponent", physical=(1.0, 1e4)),
 )
 
 
@@ -50,6 +58,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * (n + 8.0) / (8.0 * jnp.pi) * m.safe_pow(h[..., 2:3], n)
 
 
+def halfwidth(p):
+    """(n.h)^n = 1/2 at th_h = acos(2^(-1/n)); twice that in reflected directions."""
+    return 2.0 * math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 MODEL = Model(
     name="blinn_phong",
     params=PARAMS,
@@ -57,4 +70,5 @@ MODEL = Model(
     citation="J. F. Blinn, Models of Light Reflection for Computer Synthesized Pictures, SIGGRAPH 1977",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -19,6 +19,20 @@ Naming scheme (what users and fit files address parameters by)
 The composite's formula is the sum of its components' formulas; it is reciprocal when every
 component is; a parameter stays ``linear`` in the sum when it was linear in its component (the
 components share no parameter but kd, which enters each sum term linearly).
+
+Lobe order (SPEC 5: no mirror-image twin)
+-----------------------------------------
+Lobes of one kind (the specular lobes of repeated components, ``ggx1`` and ``ggx2``; the lobes of
+a multi-lobe Lafortune model) are interchangeable: swapping all their parameters leaves f_r
+unchanged, so every fit would have a twin. Fits are therefore reported with the lobes of one
+kind ordered **narrowest first** by ``lobe_width``: roughness ascending, exponent descending --
+``ggx1.alpha <= ggx2.alpha``, ``blinn_phong1.n >= blinn_phong2.n``, for two-parameter lobes the
+product (``ward1.alpha_x * ward1.alpha_y <= ward2.alpha_x * ward2.alpha_y``, ``nu * nv``
+descending). The solver works on the unordered space (an order constraint is no box); the fit's
+result is put in order by swapping whole lobes (``brdffit.fitting.space``), which changes no
+value of f_r, hence no loss. Lobes that ``fixed=`` or ``bounds=`` tell apart (a fixed
+``ggx1.f0``, a bound on ``ggx2.alpha`` only) are not interchangeable for that fit: a swap would
+break the user's constraint, and no twin exists, so they are left as the solver found them.
 """
 
 from __future__ import annotations
@@ -27,9 +41,11 @@ import dataclasses
 import functools
 from collections.abc import Sequence
 
+import math
+
 import jax.numpy as jnp
 
-from .base import Model
+from .base import Lobe, Model
 
 #: Components that are a diffuse term (own the shared kd; at most one per composite).
 DIFFUSE = ("lambert", "oren_nayar")
@@ -53,6 +69,20 @@ def _sum_formula(parts: tuple[_Part, ...], p, wi, wo):
     return total
 
 
+def lobe_width(model: Model, lobe: Lobe, values) -> float:
+    """The ordering key of a lobe (smaller = narrower): sum of log roughness minus sum of log
+    exponent over the lobe's parameters, ``values`` mapping names to arrays (first element used)."""
+    key = 0.0
+    for name in lobe.params:
+        role = model.param(name).role
+        v = float(values[name].reshape(-1)[0])
+        if role == "roughness":
+            key += math.log(max(v, 1e-300))
+        elif role == "exponent":
+            key -= math.log(max(v, 1e-300))
+    return key
+
+
 def compose(components: Sequence[Model]) -> Model:
     """The sum of ``components`` with the naming scheme of this module."""
     components = tuple(components)
@@ -70,7 +100,7 @@ def compose(components: Sequence[Model]) -> Model:
     with_kd = [i for i, c in enumerate(components) if "kd" in c.param_names]
     owner = diffuse[0] if diffuse else (with_kd[0] if with_kd else None)
     seen: dict[str, int] = {}
-    params, parts = [], []
+    params, parts, lobes = [], [], []
     if owner is not None:
         params.append(components[owner].param("kd"))
     for i, c in enumerate(components):
@@ -84,6 +114,7 @@ def compose(components: Sequence[Model]) -> Model:
                 params.append(q.renamed(prefix + q.name))
                 names.append((q.name, prefix + q.name))
         parts.append(_Part(c.formula, tuple(names)))
+        lobes += [Lobe(lobe.kind, tuple(prefix + q for q in lobe.params)) for lobe in c.lobes]
     name = "+".join(c.name for c in components)
     doc = (
         f"Composite model {name}: the sum of its components' BRDFs.\n\n"
@@ -100,4 +131,5 @@ def compose(components: Sequence[Model]) -> Model:
         channels=components[0].channels,
         doc=doc,
         components=components,
+        lobes=tuple(lobes),
     )

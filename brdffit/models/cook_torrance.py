@@ -6,14 +6,19 @@ C. Schlick, "An Inexpensive BRDF Model for Physically-based Rendering", CGF 13(3
 
 Parameters
 ----------
-=====  ========  ===============  =======  =========  =============================================
-name   channels  bounds           default  role       meaning
-=====  ========  ===============  =======  =========  =============================================
-kd     3         [0, 1]           0.1      albedo     diffuse albedo (linear)
-ks     3         [0, 1]           0.5      albedo     specular scale (linear)
-alpha  1         [1e-4, 1] (log)  0.2      roughness  Beckmann rms slope (the paper's m)
-f0     1         [0, 1]           0.04     fresnel    Schlick reflectance at normal incidence
-=====  ========  ===============  =======  =========  =============================================
+=====  ========  =================  =========  =======  =========  =======================================
+name   channels  bounds             physical   default  role       meaning
+=====  ========  =================  =========  =======  =========  =======================================
+kd     3         [0, inf)           [0, 1]     0.1      albedo     diffuse albedo (linear)
+ks     3         [0, inf)           [0, 1]     0.5      albedo     specular scale (linear)
+alpha  1         [1e-4, inf) (log)  [1e-4, 1]  0.2      roughness  Beckmann rms slope (the paper's m)
+f0     1         [0, 1]             [0, 1]     0.04     fresnel    Schlick reflectance at normal incidence
+=====  ========  =================  =========  =======  =========  =======================================
+
+Bounds (what the formula needs): kd, ks >= 0, no upper bound (arbitrary units, ks > 1 for
+measured gloss); alpha > 0, floored at 1e-4 (Beckmann D evaluated in log space is exact there), no
+upper bound; f0 in [0, 1]. Physical range (``physical=True``): kd, ks <= 1 (normalised D, F G <= 1:
+each term's albedo is at most its scale), alpha <= 1.
 
 BRDF form implemented (the modern normalisation)::
 
@@ -34,15 +39,19 @@ cosines are clamped at 1e-7 at the horizon. Reciprocal.
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
-    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular scale"),
-    Param("alpha", 1, 1e-4, 1.0, 0.2, "roughness", doc="Beckmann rms slope m"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="specular scale", physical=(0.0, 1.0)),
+    Param("alpha", 1, 1e-4, INF, 0.2, "roughness", doc="Beckmann rms slope m", physical=(1e-4, 1.0)),
     Param("f0", 1, 0.0, 1.0, 0.04, "fresnel", doc="Schlick reflectance at normal incidence"),
 )
 
@@ -69,6 +78,12 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + microfacet_lobe(p, wi, wo, h, beckmann_ndf(h, p["alpha"]))
 
 
+def halfwidth(p):
+    """Beckmann D(th_h)/D(0) ~ exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2); twice
+    that in reflected directions."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.log(2.0)))
+
+
 MODEL = Model(
     name="cook_torrance",
     params=PARAMS,
@@ -76,4 +91,5 @@ MODEL = Model(
     citation="R. L. Cook, K. E. Torrance, A Reflectance Model for Computer Graphics, ACM TOG 1(1), 1982",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

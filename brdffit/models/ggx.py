@@ -6,14 +6,22 @@ BRDF Model for Physically-based Rendering", CGF 13(3), 1994.
 
 Parameters
 ----------
-=====  ========  ===============  =======  =========  =============================================
-name   channels  bounds           default  role       meaning
-=====  ========  ===============  =======  =========  =============================================
-kd     3         [0, 1]           0.1      albedo     diffuse albedo (linear)
-ks     3         [0, 1]           0.5      albedo     specular scale (linear)
-alpha  1         [1e-4, 1] (log)  0.2      roughness  GGX roughness (= Mitsuba's alpha)
-f0     1         [0, 1]           0.04     fresnel    Schlick reflectance at normal incidence
-=====  ========  ===============  =======  =========  =============================================
+=====  ========  =================  =========  =======  =========  =======================================
+name   channels  bounds             physical   default  role       meaning
+=====  ========  =================  =========  =======  =========  =======================================
+kd     3         [0, inf)           [0, 1]     0.1      albedo     diffuse albedo (linear)
+ks     3         [0, inf)           [0, 1]     0.5      albedo     specular scale (linear)
+alpha  1         [1e-4, inf) (log)  [1e-4, 1]  0.2      roughness  GGX roughness (= Mitsuba's alpha)
+f0     1         [0, 1]             [0, 1]     0.04     fresnel    Schlick reflectance at normal incidence
+=====  ========  =================  =========  =======  =========  =======================================
+
+Bounds (what the formula needs): kd, ks >= 0 (a negative scale gives a negative BRDF), with no
+upper bound, because measured tables are often in arbitrary units and glossy paints want ks > 1;
+alpha > 0 (alpha = 0 is a mirror, a delta function), floored at 1e-4 where D is still exact in
+float32, no upper bound (a very rough surface; D and G stay finite, see ``brdffit.testing``);
+f0 in [0, 1] (Schlick's F leaves [0, 1] otherwise). Physical range (``physical=True``): kd <= 1 and
+ks <= 1 (each term's albedo: D is normalised and F G <= 1, so the lobe reflects at most ks; the sum
+kd + ks <= 1 is not enforced), alpha <= 1 (rms slope beyond 45 degrees).
 
 f_r = kd/pi + ks F(h.l) G(l, v) D(h) / (4 (n.l)(n.v))
 
@@ -27,20 +35,24 @@ none, sample_visible irrelevant for eval) divided by cos(theta_o).
 
 Lecture form: the specular term of the ambient + diffuse + specular sum, with the microfacet
 BRDF in place of r_s (v.r)^h: I_s = I_L (n.l) ks F G D / (4 (n.l)(n.v)); D is normalised
-(int D (n.h) dw = 1), so ks is a reflectance scale in [0, 1]. Reciprocal.
+(int D (n.h) dw = 1), so ks <= 1 is an energy-conserving reflectance scale. Reciprocal.
 """
 
 from __future__ import annotations
+
+import math
 
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
-    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular scale"),
-    Param("alpha", 1, 1e-4, 1.0, 0.2, "roughness", doc="GGX roughness (= Mitsuba alpha)"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="specular scale", physical=(0.0, 1.0)),
+    Param("alpha", 1, 1e-4, INF, 0.2, "roughness", doc="GGX roughness (= Mitsuba alpha)", physical=(1e-4, 1.0)),
     Param("f0", 1, 0.0, 1.0, 0.04, "fresnel", doc="Schlick reflectance at normal incidence"),
 )
 
@@ -71,6 +83,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + specular_lobe(p, wi, wo)
 
 
+def halfwidth(p):
+    """D(th_h)/D(0) = 1/2 at tan th_h = alpha sqrt(sqrt(2) - 1); reflected directions: twice that."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+
+
 MODEL = Model(
     name="ggx",
     params=PARAMS,
@@ -78,4 +95,5 @@ MODEL = Model(
     citation="Walter, Marschner, Li, Torrance: Microfacet Models for Refraction through Rough Surfaces, EGSR 2007",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -5,16 +5,24 @@ Reflectance Functions", SIGGRAPH 1997.
 
 Parameters (one lobe: ``get("lafortune")``)
 -------------------------------------------
-=====  ========  ================  =======  ========  =============================================
-name   channels  bounds            default  role      meaning
-=====  ========  ================  =======  ========  =============================================
-kd     3         [0, 1]            0.1      albedo    diffuse albedo (linear)
-rho    3         [0, 1e4]          1.0      albedo    lobe scale (linear; not normalised)
-cx     1         [-2, 2]           -1       shape     C_x = C_y (isotropic lobe); < 0 forward,
-                                                      > 0 retro-reflection
-cz     1         [0, 2]            1        shape     C_z
-n      1         [1, 1e4] (log)    20       exponent  lobe exponent
-=====  ========  ================  =======  ========  =============================================
+====  ========  ==============  =========  =======  ========  ========================================
+name  channels  bounds          physical   default  role      meaning
+====  ========  ==============  =========  =======  ========  ========================================
+kd    3         [0, inf)        [0, 1]     0.1      albedo    diffuse albedo (linear)
+rho   3         [0, inf)        [0, 1600]  1        albedo    lobe scale (linear; not normalised)
+cx    1         [-2, 2]         [-2, 2]    -1       shape     C_x = C_y (isotropic lobe); < 0 forward,
+                                                              > 0 retro-reflection
+cz    1         [0, 2]          [0, 2]     1        shape     C_z
+n     1         [1, inf) (log)  [1, 1e4]   20       exponent  lobe exponent
+====  ========  ==============  =========  =======  ========  ========================================
+
+Bounds (what the formula needs): kd, rho >= 0, no upper bound (the lobe is not normalised); n >= 1
+(as for ``phong``), no upper bound; cx in [-2, 2], cz in [0, 2]: the lobe is rho |C|^n times a
+function of the direction of C, so the length of C trades against rho and this box holds every
+lobe direction with cz >= 0 while keeping |C|^n within the cap (see Numerics). Physical range
+(``physical=True``): kd <= 1; n <= 1e4; rho <= 1.6e3: a lobe with |C| = 1 has albedo about
+rho 2 pi/(n + 2) at normal incidence, so energy conservation couples rho with n (no box); the
+physical box holds every rho that allows for n <= 1e4 (1592); C as its bounds.
 
 Formula::
 
@@ -22,9 +30,10 @@ Formula::
 
 Several lobes: ``get("lafortune", lobes=3)`` or ``get("lafortune3")`` is the model named
 ``lafortune3`` with parameters kd, rho1, cx1, cz1, n1, rho2, cx2, cz2, n2, rho3, ... (lobe j's
-parameters carry the suffix j; default exponents 20, 200, 2000, ... so that the lobes start
-distinct); ``lafortune`` itself is one lobe with the SPEC names. Composition
-("lambert+lafortune+lafortune") also works and names lobes lafortune1.rho, lafortune2.rho, ...
+parameters carry the suffix j; default exponents ..., 2000, 200, 20, a decade apart so that the
+lobes start distinct, the narrowest first as ``compose`` orders lobes); ``lafortune`` itself is
+one lobe with the SPEC names. Composition ("lambert+lafortune+lafortune") also works and names
+lobes lafortune1.rho, lafortune2.rho, ...
 
 With cx = -1, cz = 1 a lobe is Phong's (r.v)^n, the lecture's specular term without its 1/(n.l)
 (see ``phong``); Lafortune's lobes generalise it to off-specular and retro-reflective peaks. The
@@ -44,27 +53,29 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Lobe, Model, Param
 
-KD = Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo")
+INF = math.inf
+
+KD = Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0))
 
 
 def lobe_params(suffix: str = "", n: float = 20.0, rho: float = 1.0) -> tuple[Param, ...]:
     return (
-        Param("rho" + suffix, 3, 0.0, 1e4, rho, "albedo", linear=True, scale="linear", doc="lobe scale"),
+        Param("rho" + suffix, 3, 0.0, INF, rho, "albedo", linear=True, doc="lobe scale", physical=(0.0, 1.6e3)),
         Param("cx" + suffix, 1, -2.0, 2.0, -1.0, "shape", doc="C_x = C_y"),
         Param("cz" + suffix, 1, 0.0, 2.0, 1.0, "shape", doc="C_z"),
-        Param("n" + suffix, 1, 1.0, 1e4, n, "exponent", doc="lobe exponent"),
+        Param("n" + suffix, 1, 1.0, INF, n, "exponent", doc="lobe exponent", physical=(1.0, 1e4)),
     )
 
 
 def _lobe_defaults(j: int, lobes: int) -> tuple[float, float]:
-    """Default (n, rho) of lobe j (1-based) of ``lobes``: exponents a decade apart (20, 200, ...)
-    so that the lobes start distinct, and rho such that each lobe's albedo at normal incidence is
-    about 0.3 / lobes."""
+    """Default (n, rho) of lobe j (1-based) of ``lobes``: exponents a decade apart, the narrowest
+    first (..., 2000, 200, 20: the order ``compose.order_lobes`` keeps), so that the lobes start
+    distinct, and rho such that each lobe's albedo at normal incidence is about 0.3 / lobes."""
     if lobes == 1:
         return 20.0, 1.0
-    n = min(20.0 * 10.0 ** (j - 1), 1e4)
+    n = min(20.0 * 10.0 ** (lobes - j), 1e4)
     return n, round((n + 2.0) / (2.0 * math.pi) * 0.3 / lobes, 4)
 
 
@@ -79,6 +90,11 @@ def _formula(suffixes, p, wi, wo):
     for s in suffixes:  # a loop over lobes (a handful), not over samples
         f = f + p["rho" + s] * lobe(wi, wo, p["cx" + s], p["cz" + s], p["n" + s])
     return f
+
+
+def halfwidth(p):
+    """A lobe with |C| = 1 is (cos psi)^n: 1/2 at psi = acos(2^(-1/n)) (|C| != 1 trades against rho)."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
 
 
 @functools.lru_cache(maxsize=None)
@@ -99,6 +115,8 @@ def lafortune(lobes: int = 1) -> Model:
         "Non-Linear Approximation of Reflectance Functions, SIGGRAPH 1997",
         reciprocal=True,
         doc=__doc__,
+        halfwidth=halfwidth,
+        lobes=tuple(Lobe("lafortune", tuple(q + s for q in ("rho", "cx", "cz", "n"))) for s in suffixes),
     )
 
 

@@ -4,11 +4,14 @@ J. H. Lambert, *Photometria*, 1760.
 
 Parameters
 ----------
-====  ========  ======  =======  ======  ==============================
-name  channels  bounds  default  role    meaning
-====  ========  ======  =======  ======  ==============================
-kd    3         [0, 1]  0.5      albedo  diffuse albedo (linear)
-====  ========  ======  =======  ======  ==============================
+====  ========  ========  ========  =======  ======  =======================
+name  channels  bounds    physical  default  role    meaning
+====  ========  ========  ========  =======  ======  =======================
+kd    3         [0, inf)  [0, 1]    0.5      albedo  diffuse albedo (linear)
+====  ========  ========  ========  =======  ======  =======================
+
+Bounds (what the formula needs): kd >= 0, no upper bound (data in arbitrary units). Physical
+range (``physical=True``): kd <= 1 (the albedo is kd).
 
 Lecture form: I_d = I_L k_d (n . l). As a BRDF the cosine belongs to the rendering equation, not to
 f_r, and energy conservation fixes the 1/pi: f_r = k_d / pi, whose directional albedo is k_d
@@ -18,12 +21,16 @@ ambient term I_a k_a is a constant light, not part of any f_r. Equals Mitsuba's 
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="diffuse albedo"),
+    Param("kd", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
 )
 
 

@@ -5,13 +5,17 @@ M. Oren, S. K. Nayar, "Generalization of Lambert's Reflectance Model", SIGGRAPH 
 
 Parameters
 ----------
-=====  ========  ==============  =======  =========  ==============================================
-name   channels  bounds          default  role       meaning
-=====  ========  ==============  =======  =========  ==============================================
-kd     3         [0, 1]          0.5      albedo     albedo rho of the facets (linear)
-sigma  1         [0, pi/2]       0.3      roughness  standard deviation of the facet slope angle,
-                                                     **in radians** (the paper's sigma)
-=====  ========  ==============  =======  =========  ==============================================
+=====  ========  ========  =========  =======  =========  ============================================
+name   channels  bounds    physical   default  role       meaning
+=====  ========  ========  =========  =======  =========  ============================================
+kd     3         [0, inf)  [0, 1]     0.5      albedo     albedo rho of the facets (linear)
+sigma  1         [0, inf)  [0, pi/2]  0.3      roughness  standard deviation of the facet slope angle,
+                                                          **in radians** (the paper's sigma)
+=====  ========  ========  =========  =======  =========  ============================================
+
+Bounds (what the formula needs): kd >= 0, no upper bound (arbitrary units); sigma >= 0, no upper
+bound (A and B saturate). Physical range (``physical=True``): kd <= 1, sigma <= pi/2 (a slope-angle
+standard deviation beyond 90 degrees describes no surface).
 
 Formula::
 
@@ -34,9 +38,11 @@ import jax.numpy as jnp
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="facet albedo"),
-    Param("sigma", 1, 0.0, math.pi / 2, 0.3, "roughness", doc="slope-angle standard deviation, radians"),
+    Param("kd", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="facet albedo", physical=(0.0, 1.0)),
+    Param("sigma", 1, 0.0, INF, 0.3, "roughness", doc="slope-angle standard deviation, radians", physical=(0.0, math.pi / 2)),
 )
 
 
@@ -52,6 +58,7 @@ def formula(p, wi, wo):
 
 MODEL = Model(
     name="oren_nayar",
+    lobes=(),  # a diffuse term (a composite has at most one): no specular lobe to order
     params=PARAMS,
     formula=formula,
     citation="M. Oren, S. K. Nayar, Generalization of Lambert's Reflectance Model, SIGGRAPH 1994",

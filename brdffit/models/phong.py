@@ -5,13 +5,18 @@ R. R. Lewis, "Making Shaders More Physically Plausible", CGF 13(2), 1994 (the no
 
 Parameters
 ----------
-=====  ========  =================  =======  ========  ===========================================
-name   channels  bounds             default  role      meaning
-=====  ========  =================  =======  ========  ===========================================
-kd     3         [0, 1]             0.1      albedo    diffuse albedo (linear)
-ks     3         [0, 1]             0.5      albedo    specular albedo at normal incidence (linear)
-n      1         [1, 1e4] (log)     20       exponent  Phong exponent (shininess)
-=====  ========  =================  =======  ========  ===========================================
+====  ========  ==============  ========  =======  ========  ============================================
+name  channels  bounds          physical  default  role      meaning
+====  ========  ==============  ========  =======  ========  ============================================
+kd    3         [0, inf)        [0, 1]    0.1      albedo    diffuse albedo (linear)
+ks    3         [0, inf)        [0, 1]    0.5      albedo    specular albedo at normal incidence (linear)
+n     1         [1, inf) (log)  [1, 1e4]  20       exponent  Phong exponent (shininess)
+====  ========  ==============  ========  =======  ========  ============================================
+
+Bounds (what the formula needs): kd, ks >= 0, no upper bound (arbitrary units); n >= 1 (below 1 the
+lobe's gradient with respect to the directions is infinite at its edge r.v = 0), no upper bound.
+Physical range (``physical=True``): kd <= 1, ks <= 1 (the normalisation makes ks the lobe's albedo
+at normal incidence), n <= 1e4 (a lobe about 1 degree wide, the sharpest a measurement resolves).
 
 BRDF form implemented::
 
@@ -32,15 +37,19 @@ diffuse term k_d (n.l) becomes the BRDF kd/pi (the cosine belongs to the renderi
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
-    Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True, doc="specular albedo at normal incidence"),
-    Param("n", 1, 1.0, 1e4, 20.0, "exponent", doc="Phong exponent"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.5, "albedo", linear=True, doc="specular albedo at normal incidence", physical=(0.0, 1.0)),
+    Param("n", 1, 1.0, INF, 20.0, "exponent", doc="Phong exponent", physical=(1.0, 1e4)),
 )
 
 
@@ -54,6 +63,11 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * (n + 2.0) / (2.0 * jnp.pi) * lobe(wi, wo, n)
 
 
+def halfwidth(p):
+    """(r.v)^n = 1/2 at the angle acos(2^(-1/n)) from the mirror direction."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
+
+
 MODEL = Model(
     name="phong",
     params=PARAMS,
@@ -62,4 +76,5 @@ MODEL = Model(
     "normalisation: R. R. Lewis, Making Shaders More Physically Plausible, CGF 13(2), 1994",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

@@ -4,14 +4,19 @@ B. T. Phong, "Illumination for Computer Generated Pictures", CACM 18(6), 1975.
 
 Parameters
 ----------
-=====  ========  =================  =======  ========  ===========================================
-name   channels  bounds             default  role      meaning
-=====  ========  =================  =======  ========  ===========================================
-kd     3         [0, 1]             0.1      albedo    diffuse albedo (linear)
-ks     3         [0, 1e4]           0.5      albedo    the lecture's r_s (linear); no normalisation,
-                                                       so sharp lobes need large values
-n      1         [1, 1e4] (log)     20       exponent  the lecture's h (shininess)
-=====  ========  =================  =======  ========  ===========================================
+====  ========  ==============  =========  =======  ========  =============================================
+name  channels  bounds          physical   default  role      meaning
+====  ========  ==============  =========  =======  ========  =============================================
+kd    3         [0, inf)        [0, 1]     0.1      albedo    diffuse albedo (linear)
+ks    3         [0, inf)        [0, 1600]  0.5      albedo    the lecture's r_s (linear); no normalisation,
+                                                              so sharp lobes need large values
+n     1         [1, inf) (log)  [1, 1e4]   20       exponent  the lecture's h (shininess)
+====  ========  ==============  =========  =======  ========  =============================================
+
+Bounds (what the formula needs): kd, ks >= 0, no upper bound; n >= 1, no upper bound. Physical
+range (``physical=True``): kd <= 1; n <= 1e4; ks <= 1.6e3: the lobe's albedo at normal incidence is
+about ks 2 pi/(n + 1), so ks <= (n + 1)/(2 pi) couples ks with n; the physical box holds every ks
+that allows for n <= 1e4 (1592).
 
 Lecture form::
 
@@ -29,21 +34,30 @@ reciprocal variant is ``phong``. (n.l) is clamped at 1e-7 at the horizon.
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo (pi times the lecture's k_d)"),
-    Param("ks", 3, 0.0, 1e4, 0.5, "albedo", linear=True, scale="linear", doc="the lecture's r_s"),
-    Param("n", 1, 1.0, 1e4, 20.0, "exponent", doc="the lecture's exponent h"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo (pi times the lecture's k_d)", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.5, "albedo", linear=True, scale="linear", doc="the lecture's r_s", physical=(0.0, 1.6e3)),
+    Param("n", 1, 1.0, INF, 20.0, "exponent", doc="the lecture's exponent h", physical=(1.0, 1e4)),
 )
 
 
 def formula(p, wi, wo):
     spec = m.safe_pow(m.dot(m.reflect(wi), wo), p["n"]) / m.cos_theta(wi)
     return p["kd"] / jnp.pi + p["ks"] * spec
+
+
+def halfwidth(p):
+    """(r.v)^n = 1/2 at the angle acos(2^(-1/n)) from the mirror direction."""
+    return math.acos(2.0 ** (-1.0 / p["n"]))
 
 
 MODEL = Model(
@@ -53,4 +67,5 @@ MODEL = Model(
     citation="B. T. Phong, Illumination for Computer Generated Pictures, CACM 18(6), 1975",
     reciprocal=False,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

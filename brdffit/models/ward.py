@@ -4,14 +4,18 @@ G. J. Ward, "Measuring and Modeling Anisotropic Reflection", SIGGRAPH 1992, eq. 
 
 Parameters
 ----------
-========  ========  ===============  =======  ==========  =========================================
-name      channels  bounds           default  role        meaning
-========  ========  ===============  =======  ==========  =========================================
-kd        3         [0, 1]           0.1      albedo      diffuse albedo (Ward's rho_d; linear)
-ks        3         [0, 1]           0.3      albedo      specular albedo (Ward's rho_s; linear)
-alpha_x   1         [1e-4, 1] (log)  0.2      roughness   rms slope along the tangent x (phi = 0)
-alpha_y   1         [1e-4, 1] (log)  0.2      roughness   rms slope along the bitangent y
-========  ========  ===============  =======  ==========  =========================================
+=======  ========  =================  =========  =======  =========  =======================================
+name     channels  bounds             physical   default  role       meaning
+=======  ========  =================  =========  =======  =========  =======================================
+kd       3         [0, inf)           [0, 1]     0.1      albedo     diffuse albedo (Ward's rho_d; linear)
+ks       3         [0, inf)           [0, 1]     0.3      albedo     specular albedo (Ward's rho_s; linear)
+alpha_x  1         [1e-4, inf) (log)  [1e-4, 1]  0.2      roughness  rms slope along the tangent x (phi = 0)
+alpha_y  1         [1e-4, inf) (log)  [1e-4, 1]  0.2      roughness  rms slope along the bitangent y
+=======  ========  =================  =========  =======  =========  =======================================
+
+Bounds (what the formula needs): kd, ks >= 0, no upper bound (arbitrary units); alpha_x, alpha_y
+> 0 (the lobe divides by them), floored at 1e-4, no upper bound. Physical range
+(``physical=True``): kd, ks <= 1 (Ward's rho_d, rho_s are albedos), alpha_x, alpha_y <= 1.
 
 Formula (BRDF form, as in the paper)::
 
@@ -27,16 +31,20 @@ tangent at phi = 0.
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
 from . import _math as m
 from .base import Model, Param
 
+INF = math.inf
+
 PARAMS = (
-    Param("kd", 3, 0.0, 1.0, 0.1, "albedo", linear=True, doc="diffuse albedo"),
-    Param("ks", 3, 0.0, 1.0, 0.3, "albedo", linear=True, doc="specular albedo"),
-    Param("alpha_x", 1, 1e-4, 1.0, 0.2, "roughness", doc="rms slope along x"),
-    Param("alpha_y", 1, 1e-4, 1.0, 0.2, "roughness", doc="rms slope along y"),
+    Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", physical=(0.0, 1.0)),
+    Param("ks", 3, 0.0, INF, 0.3, "albedo", linear=True, doc="specular albedo", physical=(0.0, 1.0)),
+    Param("alpha_x", 1, 1e-4, INF, 0.2, "roughness", doc="rms slope along x", physical=(1e-4, 1.0)),
+    Param("alpha_y", 1, 1e-4, INF, 0.2, "roughness", doc="rms slope along y", physical=(1e-4, 1.0)),
 )
 
 
@@ -49,6 +57,12 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi + p["ks"] * jnp.exp(e) / norm
 
 
+def halfwidth(p):
+    """exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2), along the narrower axis;
+    twice that in reflected directions."""
+    return 2.0 * math.atan(min(p["alpha_x"], p["alpha_y"]) * math.sqrt(math.log(2.0)))
+
+
 MODEL = Model(
     name="ward",
     params=PARAMS,
@@ -56,4 +70,5 @@ MODEL = Model(
     citation="G. J. Ward, Measuring and Modeling Anisotropic Reflection, SIGGRAPH 1992",
     reciprocal=True,
     doc=__doc__,
+    halfwidth=halfwidth,
 )

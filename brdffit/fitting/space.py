@@ -1,0 +1,296 @@
+"""The parameter space of one fit (SPEC 5, "Parameter space"): bounds, fixed values, lobe order.
+
+``ParameterSpace.build(model, bounds=, fixed=, physical=)`` resolves, per flat parameter entry:
+
+1. the model's declared bounds (only what the formula needs; may be infinite, see
+   ``brdffit.models.base``);
+2. with ``physical=True``, the declared physical range instead (finite, plausible);
+3. ``bounds={"name": (lo, hi)}``: the user's box for that parameter (replaces 1 and 2; ``None`` on
+   a side keeps it). It must lie inside the declared bounds -- outside them the formula is not
+   defined or not finite -- and it may be wider than the physical range;
+4. ``fixed={"name": value}``: the parameter is held at ``value`` (a scalar, or one value per
+   channel); the value must lie inside the declared bounds and any ``bounds=`` given for it
+   (the physical range does not apply to a value the user fixes).
+
+The result is data-independent and immutable: flat ``lo, hi`` (float64, may hold +-inf), the
+``free`` mask (False = held at its value), ``values`` (the fixed values, NaN where free) and the
+groups of interchangeable lobes (``order``). Solvers take ``lo, hi, free`` as arguments.
+
+Lobe order: lobes of one kind are ordered narrowest first (``brdffit.models.compose``); the
+solver works on the unordered box and ``canonical`` swaps whole lobes of a fitted vector into
+order, which leaves f_r and the loss unchanged. Lobes are interchangeable for a fit only when
+the user's constraints do not tell them apart: equal ``lo``, ``hi``, ``free`` and fixed values
+entry by entry; otherwise a swap would break a constraint (and no mirror twin exists), so such
+lobes are left as found.
+
+Known limit: the box cannot express coupled criteria: ``physical=True`` bounds each albedo on its
+own (kd <= 1, ks <= 1), not their sum.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..errors import UsageError
+from ..models.base import Lobe, Model
+from ..models.compose import lobe_width
+
+#: A parameter within this fraction of its span of a bound counts as on it (span: the finite
+#: width of its box, or of ``Param.finite_range`` where the box is infinite).
+AT_BOUND_RTOL = 1e-6
+
+
+def _span(model: Model, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    width = hi - lo
+    finite = np.concatenate([np.full(model.size(p), p.finite_range[1] - p.finite_range[0]) for p in model.params])
+    return np.where(np.isfinite(width) & (width > 0), width, np.maximum(finite, 1e-300))
+
+
+def _number(name: str, what: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{what} for {name!r}: {value!r} is not a number") from None
+    if math.isnan(v):
+        raise UsageError(f"{what} for {name!r}: NaN is not a value")
+    return v
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ParameterSpace:
+    """Where a fit may move: flat ``lo``/``hi`` (may be infinite), ``free`` mask, fixed ``values``,
+    interchangeable lobe groups ``order`` (each group narrowest first after ``canonical``)."""
+
+    model: Model
+    lo: np.ndarray
+    hi: np.ndarray
+    free: np.ndarray
+    values: np.ndarray
+    order: tuple[tuple[Lobe, ...], ...]
+    physical: bool = False
+    #: Names given in ``bounds=`` (for messages).
+    overridden: frozenset[str] = frozenset()
+
+    # -- construction -----------------------------------------------------------------------------
+    @classmethod
+    def build(cls, model: Model, bounds: Mapping | None = None, fixed: Mapping | None = None,
+              physical: bool = False) -> "ParameterSpace":
+        bounds = dict(bounds or {})
+        fixed = dict(fixed or {})
+        for what, given in (("bounds", bounds), ("fixed", fixed)):
+            unknown = [k for k in given if k not in model.param_names]
+            if unknown:
+                raise UsageError(
+                    f"{what}: model {model.name!r} has no parameter {unknown[0]!r}; it has {', '.join(model.param_names)}"
+                )
+        lo_decl, hi_decl = model.bounds()
+        lo, hi = model.bounds(physical=bool(physical))
+        lo, hi = lo.copy(), hi.copy()
+        free = np.ones(lo.shape, bool)
+        values = np.full(lo.shape, np.nan)
+        slices = dict(_slices(model))
+        for name, box in bounds.items():
+            s = slices[name]
+            if isinstance(box, str) or not hasattr(box, "__len__") or len(box) != 2:
+                raise UsageError(f"bounds for {name!r}: expected (lower, upper), got {box!r}")
+            a = lo_decl[s][0] if box[0] is None else _number(name, "lower bound", box[0])
+            b = hi_decl[s][0] if box[1] is None else _number(name, "upper bound", box[1])
+            if a > b:
+                raise UsageError(f"bounds for {name!r}: lower {a:g} is above upper {b:g}")
+            if a < lo_decl[s][0] or b > hi_decl[s][0]:
+                raise UsageError(
+                    f"bounds for {name!r}: ({a:g}, {b:g}) leaves the range the formula allows, "
+                    f"[{lo_decl[s][0]:g}, {hi_decl[s][0]:g}]"
+                )
+            lo[s], hi[s] = a, b
+        for name, value in fixed.items():
+            s = slices[name]
+            n = s.stop - s.start
+            arr = np.atleast_1d(np.asarray(value, dtype=object))
+            if arr.ndim != 1 or arr.size not in (1, n):
+                raise UsageError(f"fixed value for {name!r}: expected 1 or {n} numbers, got {value!r}")
+            v = np.broadcast_to(np.asarray([_number(name, "fixed value", x) for x in arr]), (n,))
+            a, b = (lo[s], hi[s]) if name in bounds else (lo_decl[s], hi_decl[s])
+            if np.any(v < a) or np.any(v > b):
+                raise UsageError(f"fixed value for {name!r}: {value!r} outside its bounds [{a[0]:g}, {b[0]:g}]")
+            lo[s] = hi[s] = values[s] = v
+            free[s] = False
+        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds))
+        return dataclasses.replace(space, order=space._interchangeable_groups())
+
+    def _interchangeable_groups(self) -> tuple[tuple[Lobe, ...], ...]:
+        slices = dict(_slices(self.model))
+        by_kind: dict[str, list[Lobe]] = {}
+        for lobe in self.model.lobes:
+            by_kind.setdefault(lobe.kind, []).append(lobe)
+
+        def signature(lobe: Lobe):
+            parts = []
+            for name in lobe.params:
+                s = slices[name]
+                parts.append((tuple(self.lo[s]), tuple(self.hi[s]), tuple(self.free[s]),
+                              tuple(np.nan_to_num(self.values[s], nan=-7.77e300))))
+            return tuple(parts)
+
+        groups = []
+        for lobes in by_kind.values():
+            # Lobes of one kind with equal constraints form a group; others stay where they are.
+            classes: dict[tuple, list[Lobe]] = {}
+            for lobe in lobes:
+                classes.setdefault(signature(lobe), []).append(lobe)
+            groups += [tuple(c) for c in classes.values() if len(c) > 1]
+        return tuple(groups)
+
+    # -- vectors ------------------------------------------------------------------------------------
+    @property
+    def n_free(self) -> int:
+        return int(self.free.sum())
+
+    def clip(self, v) -> np.ndarray:
+        """A flat vector moved into the box, fixed entries at their values."""
+        v = np.clip(np.asarray(v, dtype=np.float64), self.lo, self.hi)
+        return np.where(self.free, v, self.values)
+
+    def contains(self, v, atol: float = 0.0) -> bool:
+        v = np.asarray(v, dtype=np.float64)
+        return bool(np.all(v >= self.lo - atol) and np.all(v <= self.hi + atol))
+
+    def canonical(self, v) -> np.ndarray:
+        """``v`` with the lobes of every interchangeable group sorted narrowest first (whole lobes
+        swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
+        v = np.asarray(v, dtype=np.float64).copy()
+        if not self.order:
+            return v
+        slices = dict(_slices(self.model))
+        params = {name: v[s] for name, s in slices.items()}
+        for group in self.order:
+            blocks = [np.concatenate([params[q] for q in lobe.params]) for lobe in group]
+            widths = [lobe_width(self.model, lobe, params) for lobe in group]
+            ranked = sorted(range(len(group)), key=lambda i: widths[i])
+            for target, source in zip(group, ranked):
+                i = 0
+                for q in target.params:
+                    n = slices[q].stop - slices[q].start
+                    v[slices[q]] = blocks[source][i : i + n]
+                    i += n
+        return v
+
+    def at_bound(self, v) -> dict[str, str]:
+        """Free parameters of ``v`` on a finite bound of this space: name -> "lower", "upper", or
+        per channel ("lower in channel 0", "upper in channels 1, 2") where only some are."""
+        v = np.asarray(v, dtype=np.float64)
+        tol = AT_BOUND_RTOL * _span(self.model, self.lo, self.hi)
+        on_lo = self.free & np.isfinite(self.lo) & (v <= self.lo + tol)
+        on_hi = self.free & np.isfinite(self.hi) & (v >= self.hi - tol) & ~on_lo
+        out = {}
+        for name, s in _slices(self.model):
+            lo_c, hi_c = np.flatnonzero(on_lo[s]), np.flatnonzero(on_hi[s])
+            n = s.stop - s.start
+            parts = []
+            for side, idx in (("lower", lo_c), ("upper", hi_c)):
+                if idx.size == n:
+                    parts.append(side)
+                elif idx.size:
+                    word = "channel" if idx.size == 1 else "channels"
+                    parts.append(f"{side} in {word} {', '.join(str(i) for i in idx)}")
+            if parts:
+                out[name] = "; ".join(parts)
+        return out
+
+    def bound_origin(self, name: str, side: str) -> str:
+        """Where a parameter's lower or upper bound comes from, for messages."""
+        if name in self.overridden:
+            return "set by bounds="
+        p = self.model.param(name)
+        declared = p.lower if side == "lower" else p.upper
+        if self.physical and self.describe_bound(name, side) != declared:
+            return "its physical range; fit without physical=True to allow more"
+        return "the formula's limit"
+
+    def describe_bound(self, name: str, side: str) -> float:
+        s = dict(_slices(self.model))[name]
+        return float((self.lo if side == "lower" else self.hi)[s][0])
+
+
+def _slices(model: Model):
+    i = 0
+    for p in model.params:
+        n = model.size(p)
+        yield p.name, slice(i, i + n)
+        i += n
+
+
+# -- warnings (SPEC 5: one sentence each) ------------------------------------------------------------
+def sample_spacing(wo, max_directions: int = 2048) -> float:
+    """Typical angular spacing (radians) of the distinct view directions ``wo`` (N, 3): the median
+    angle from each to its nearest neighbour. 14.5 degrees on the UBO-81 grid (theta rings 15
+    degrees apart, azimuth steps of 14.5 to 18 degrees of arc on the outer rings). Beyond
+    ``max_directions`` distinct directions a fixed random subset is used (an upper estimate)."""
+    w = np.unique(np.round(np.asarray(wo, dtype=np.float64), 9), axis=0)
+    w = w[w[:, 2] > 0]
+    if len(w) < 2:
+        return math.pi / 2
+    if len(w) > max_directions:
+        w = w[np.random.default_rng(0).choice(len(w), max_directions, replace=False)]
+    cos = np.clip(w @ w.T, -1.0, 1.0)
+    np.fill_diagonal(cos, -1.0)
+    return float(np.median(np.arccos(cos.max(axis=1))))
+
+
+def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float]]:
+    """(lobe, half width at half maximum in radians) for every lobe whose kind declares one."""
+    from ..models import get
+
+    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in _slices(model)}
+    out = []
+    for lobe in model.lobes:
+        try:
+            base = get(lobe.kind)
+        except KeyError:
+            continue
+        if base.halfwidth is None or not base.lobes:
+            continue
+        own = dict(zip(base.lobes[0].params, (float(params[q][0]) for q in lobe.params)))
+        out.append((lobe, float(base.halfwidth(own))))
+    return out
+
+
+def _lobe_label(lobe: Lobe) -> str:
+    prefix = lobe.params[0].rsplit(".", 1)[0] if "." in lobe.params[0] else ""
+    return f"lobe {prefix}" if prefix else f"the {lobe.kind} lobe"
+
+
+def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: Mapping[str, object],
+                 spacing: float | None) -> list[str]:
+    """One sentence per problem of a fitted vector ``v``:
+
+    * a parameter on a bound (``at_bound``): the data pull it beyond, the constraint decides;
+    * a lobe narrower than the sample spacing: its full width at half maximum in reflected
+      directions (2 x ``Model.halfwidth``) below ``spacing``, so the lobe can fall between samples
+      and only its peak's product with the scale (e.g. ks / alpha^2 for GGX) is measured; on the
+      UBO-81 grid (14.5 degrees) that is GGX alpha < 0.098, Beckmann alpha < 0.076, Phong n > 86;
+    * a free parameter with no standard error that is not on a bound: the data do not determine
+      it (a near-null direction of J'J, see ``brdffit.fitting.api.standard_errors``).
+    """
+    out = []
+    for name, side in at_bound.items():
+        which = side.split(" ")[0]
+        value = space.describe_bound(name, which)
+        out.append(f"{name} ended on its {side} bound {value:g} ({space.bound_origin(name, which)}).")
+    if spacing is not None:
+        for lobe, hw in lobe_halfwidths(space.model, v):
+            if 2.0 * hw < spacing:
+                out.append(
+                    f"{_lobe_label(lobe)} is narrower than the sample spacing (width {math.degrees(2 * hw):.2g} degrees "
+                    f"at half maximum, samples {math.degrees(spacing):.3g} degrees apart): the samples see "
+                    "little more than its peak, so its width and scale are poorly determined."
+                )
+    free_names = {name for name, s in _slices(space.model) if space.free[s].any()}
+    for name in space.model.param_names:
+        if name in free_names and name not in at_bound and name in stderr and stderr[name] is None:
+            out.append(f"{name} is not determined by the data (it trades off against other parameters; no standard error).")
+    return out

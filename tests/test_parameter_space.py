@@ -1,0 +1,269 @@
+"""Issue 8 item 1, SPEC 5 "Parameter space": default bounds only where the formula needs them,
+``physical=True``, ``bounds=`` / ``fixed=`` (API and CLI), ordered lobes, ``at_bound`` and
+``warnings``; every model file's doc table equals its parameter table."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import jax
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import models
+from brdffit.cli import main
+from brdffit.errors import UsageError
+from brdffit.fitting import FitResult, fit
+from brdffit.fitting.space import ParameterSpace, fit_warnings, sample_spacing
+from brdffit.grid import spherical_to_cartesian, ubo_directions, ubo_pairs
+from brdffit.models.base import format_range
+
+INF = math.inf
+
+
+# -- declared tables ---------------------------------------------------------------------------------
+def _doc_rows(doc: str):
+    """(name, channels, bounds, physical, default, role) of the first RST table of a docstring."""
+    lines = doc.split("\n")
+    seps = [i for i, line in enumerate(lines) if re.fullmatch(r"=+( +=+)+", line)]
+    header = lines[seps[0] + 1]
+    starts = [header.index(word) for word in ("name", "channels", "bounds", "physical", "default", "role", "meaning")]
+    rows = []
+    for line in lines[seps[1] + 1 : seps[2]]:
+        if not line[: starts[1]].strip():
+            continue  # a continuation line of the meaning column
+        cells = [line[a:b].strip() for a, b in zip(starts, starts[1:])]
+        rows.append(tuple(cells))
+    return rows
+
+
+@pytest.mark.parametrize("name", models.names())
+def test_doc_table_equals_param_table(name):
+    model = models.get(name)
+    want = [
+        (p.name, str(p.channels), format_range(p.lower, p.upper) + (" (log)" if p.scale == "log" else ""),
+         format_range(*p.physical), f"{p.default:g}", p.role)
+        for p in model.params
+    ]
+    assert _doc_rows(model.doc) == want
+
+
+def test_doc_table_parser_sees_a_changed_bound():
+    # The comparison above would catch an edited doc table (guards the parser itself).
+    doc = models.get("ggx").doc.replace("[1e-4, inf) (log)", "[1e-4, 1] (log)  ", 1)
+    assert ("alpha", "1", "[1e-4, 1] (log)", "[1e-4, 1]", "0.2", "roughness") in _doc_rows(doc)
+
+
+def test_default_bounds_only_where_the_formula_needs_them():
+    # SPEC 5: scales non-negative (no upper bound), roughness / exponents positive, f0 in [0, 1];
+    # the physical range is finite and inside the bounds for every parameter.
+    for name in models.names():
+        for p in models.get(name).params:
+            assert all(math.isfinite(v) for v in p.physical), (name, p.name)
+            assert p.lower <= p.physical[0] <= p.default <= p.physical[1] <= p.upper
+            if p.linear:
+                assert (p.lower, p.upper) == (0.0, INF), (name, p.name)
+            if p.role in ("roughness", "exponent") and name != "oren_nayar":
+                assert p.lower > 0 and p.upper == INF, (name, p.name)
+            if p.name in ("f0", "rs"):
+                assert (p.lower, p.upper) == (0.0, 1.0)
+            if p.name in ("kd", "ks", "rd") and name not in ("phong_classic", "torrance_sparrow"):
+                assert p.physical == (0.0, 1.0), (name, p.name)  # albedo <= 1 with physical=True
+
+
+def test_sampling_and_fold_with_infinite_bounds():
+    model = models.get("ggx")
+    for key in jax.random.split(jax.random.key(1), 8):
+        v = np.asarray(model.flatten(model.sample(key)))
+        assert np.all(v >= 0) and np.all(v[:6] <= 1.0) and 1e-4 <= v[6] <= 1.0  # the finite range
+    # Beyond the physical range (ks = 5, alpha = 30): the solver's axes round-trip exactly, and a
+    # step below a lower bound folds back into the box (one reflection: slope +-1).
+    p = {"kd": [0.2, 0.1, 0.0], "ks": [5.0, 0.5, 0.0], "alpha": [30.0], "f0": [1.0]}
+    x = model.to_unconstrained(p)
+    np.testing.assert_allclose(model.flatten(model.from_unconstrained(x)), model.flatten(p), rtol=1e-12, atol=1e-15)
+    folded = model.param("ks").from_axis(np.asarray([-0.3]))
+    np.testing.assert_allclose(folded, [0.3])
+    lo, hi = model.bounds()
+    assert np.isinf(hi[:6]).all() and hi[7] == 1.0
+
+
+# -- ParameterSpace ----------------------------------------------------------------------------------
+def test_space_resolution_and_errors():
+    m = models.get("lambert+ggx+ggx")
+    s = ParameterSpace.build(m, bounds={"ggx2.alpha": (0.01, None)}, fixed={"ggx1.f0": 0.04}, physical=True)
+    flat = dict(zip(m.param_names, np.cumsum([0] + [m.size(p) for p in m.params])))
+    assert s.hi[flat["kd"]] == 1.0  # physical
+    assert (s.lo[flat["ggx2.alpha"]], s.hi[flat["ggx2.alpha"]]) == (0.01, INF)  # override, None keeps the bound
+    assert not s.free[flat["ggx1.f0"]] and s.lo[flat["ggx1.f0"]] == s.hi[flat["ggx1.f0"]] == 0.04
+    assert s.order == ()  # ggx1 and ggx2 are told apart by the user's constraints: no swapping
+    for bounds, fixed, match in (
+        ({"nosuch": (0, 1)}, None, "no parameter 'nosuch'"),
+        ({"ggx1.alpha": (0.5, 0.1)}, None, "above upper"),
+        ({"ggx1.alpha": (0.0, 0.1)}, None, "formula allows"),
+        ({"ggx1.alpha": (float("nan"), 0.1)}, None, "NaN"),
+        (None, {"ggx1.f0": 1.5}, "outside its bounds"),
+        (None, {"kd": [0.1, 0.2]}, "1 or 3 numbers"),
+    ):
+        with pytest.raises(UsageError, match=match):
+            ParameterSpace.build(m, bounds, fixed)
+
+
+def test_canonical_swaps_whole_lobes_and_keeps_f():
+    m = models.get("lambert+ggx+ggx")
+    p = {"kd": [0.1, 0.1, 0.1], "ggx1.ks": [0.9, 0.8, 0.7], "ggx1.alpha": [0.4], "ggx1.f0": [0.2],
+         "ggx2.ks": [0.3, 0.2, 0.1], "ggx2.alpha": [0.05], "ggx2.f0": [0.9]}
+    v = np.asarray(m.flatten(p))
+    s = ParameterSpace.build(m)
+    c = m.unflatten(s.canonical(v))
+    assert float(c["ggx1.alpha"][0]) == 0.05 and float(c["ggx2.alpha"][0]) == 0.4
+    np.testing.assert_array_equal(c["ggx1.ks"], [0.3, 0.2, 0.1])
+    np.testing.assert_array_equal(c["ggx2.f0"], [0.2])
+    wi, wo = ubo_pairs()
+    np.testing.assert_allclose(m.eval(c, wi, wo), m.eval(p, wi, wo), rtol=1e-13)
+    np.testing.assert_array_equal(s.canonical(s.canonical(v)), s.canonical(v))
+    # A fixed parameter tells the lobes apart: no swap (it would move the fixed value).
+    held = ParameterSpace.build(m, fixed={"ggx2.f0": 0.9})
+    np.testing.assert_array_equal(held.canonical(v), v)
+    # Exponents: narrowest first means the larger exponent first (lafortune3 lobes too).
+    lf = models.get("lafortune3")
+    q = {k: np.asarray(a) for k, a in lf.defaults().items()}
+    q["n1"], q["n3"] = np.asarray([20.0]), np.asarray([2000.0])
+    out = lf.unflatten(ParameterSpace.build(lf).canonical(lf.flatten(q)))
+    assert [float(out[f"n{j}"][0]) for j in (1, 2, 3)] == [2000.0, 200.0, 20.0]
+
+
+# -- fits --------------------------------------------------------------------------------------------
+def _scattered(model, params, n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    wi = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    wo = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    m = models.get(model)
+    return brdffit.Measurement(wi, wo, np.asarray(m.eval(m.check_params(params), wi, wo)), name=f"syn-{model}")
+
+
+def _ubo(model, params, name):
+    wi, wo = ubo_pairs()
+    m = models.get(model)
+    f = np.asarray(m.eval(m.check_params(params), wi, wo))
+    return brdffit.Measurement(wi, wo, f, grid="ubo81", name=name)
+
+
+GLOSSY = {"kd": [0.05, 0.04, 0.03], "ks": [1.6, 1.6, 1.6], "alpha": [0.15], "f0": [0.05]}
+
+
+@pytest.fixture(scope="module")
+def glossy():
+    return _ubo("ggx", GLOSSY, "ks16")
+
+
+def test_default_ks_exceeds_one_when_the_data_want_it(glossy):
+    r = fit(glossy, "ggx")
+    assert r.converged, r.status
+    np.testing.assert_allclose(r.params["ks"], 1.6, rtol=1e-4)
+    np.testing.assert_allclose(r.params["alpha"], 0.15, rtol=1e-4)
+    assert r.at_bound == {} and r.warnings == ()  # alpha 0.15 is resolved on the UBO grid
+
+
+def test_physical_keeps_albedo_at_most_one(glossy):
+    r = fit(glossy, "ggx", physical=True)
+    assert np.all(r.params["ks"] <= 1.0) and np.all(r.params["kd"] <= 1.0)
+    assert r.at_bound == {"ks": "upper"}
+    assert any(w.startswith("ks ended on its upper bound 1 (its physical range") for w in r.warnings)
+    assert r.options["physical"] is True
+
+
+def test_fixed_and_bounds_hold():
+    truth = {"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.25], "f0": [0.3]}
+    meas = _scattered("ggx", truth)
+    r = fit(meas, "ggx", fixed={"f0": 0.1, "kd": [0.3, 0.25, 0.1]}, bounds={"alpha": (0.3, 0.6)})
+    assert r.params["f0"].tolist() == [0.1]  # exactly, not approximately
+    assert r.metrics["log"] == pytest.approx(r.loss_value, rel=1e-9)  # the solver held it too
+    assert r.params["kd"].tolist() == [0.3, 0.25, 0.1]
+    assert 0.3 <= float(r.params["alpha"][0]) <= 0.6
+    assert r.at_bound == {"alpha": "lower"}  # the data want 0.25
+    assert "f0" not in r.at_bound and r.stderr["f0"] is None
+    assert any("alpha ended on its lower bound 0.3 (set by bounds=)" in w for w in r.warnings)
+    assert r.options["fixed"] == {"f0": [0.1], "kd": [0.3, 0.25, 0.1]}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("solver", ["lmb", "scipy"])
+def test_fixed_and_bounds_hold_for_other_solvers(solver):
+    meas = _scattered("ggx", {"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.25], "f0": [0.3]})
+    r = fit(meas, "ggx", solver=solver, fixed={"f0": 0.1}, bounds={"alpha": (0.3, 0.6)})
+    assert r.params["f0"].tolist() == [0.1]
+    assert 0.3 <= float(r.params["alpha"][0]) <= 0.6 and r.at_bound == {"alpha": "lower"}
+
+
+def test_composite_lobes_come_out_ordered():
+    truth = {"kd": [0.2, 0.2, 0.2], "ggx1.ks": [0.5, 0.5, 0.5], "ggx1.alpha": [0.5], "ggx1.f0": [0.1],
+             "ggx2.ks": [0.3, 0.3, 0.3], "ggx2.alpha": [0.08], "ggx2.f0": [0.1]}
+    meas = _scattered("lambert+ggx+ggx", truth)
+    # Started at the truth, whose lobes are in the wrong order: the result is its ordered twin.
+    r = fit(meas, "lambert+ggx+ggx", init=truth, solver="lmb")
+    assert float(r.params["ggx1.alpha"][0]) <= float(r.params["ggx2.alpha"][0])
+    np.testing.assert_allclose(r.params["ggx1.alpha"], 0.08, rtol=1e-4)
+    np.testing.assert_allclose(r.params["ggx2.ks"], 0.5, rtol=1e-4)
+
+
+def test_narrow_lobe_and_undetermined_parameter_warnings():
+    assert math.degrees(sample_spacing(ubo_directions())) == pytest.approx(14.49, abs=0.01)
+    r = fit(_ubo("ggx", dict(GLOSSY, alpha=[0.03], ks=[0.5] * 3), "sharp"), "ggx")
+    assert any("narrower than the sample spacing" in w for w in r.warnings), r.warnings
+    # The sentence for a parameter without a standard error that is not on a bound:
+    space = ParameterSpace.build(models.get("ggx"))
+    v = np.asarray(models.get("ggx").flatten(GLOSSY))
+    out = fit_warnings(space, v, {}, {"kd": np.ones(3), "ks": None, "alpha": np.ones(1), "f0": np.ones(1)}, None)
+    assert out == ["ks is not determined by the data (it trades off against other parameters; no standard error)."]
+
+
+def test_json_round_trip_and_older_files(glossy, tmp_path):
+    r = fit(glossy, "ggx", physical=True)
+    back = FitResult.from_json(r.to_json())
+    assert back.at_bound == r.at_bound and back.warnings == r.warnings and back.warnings
+    d = json.loads(r.to_json())
+    del d["at_bound"], d["warnings"]  # a fit.json written before these fields existed
+    old = FitResult.from_json(json.dumps(d))
+    assert old.at_bound == {} and old.warnings == ()
+
+
+# -- CLI ---------------------------------------------------------------------------------------------
+def test_cli_bound_fix_physical(glossy, tmp_path, capsys):
+    src = tmp_path / "g.npz"
+    brdffit.save(glossy, src)
+    out = tmp_path / "fit"
+    assert main(["fit", str(src), "--model", "ggx", "--fix", "f0=0.05", "--bound", "alpha=0.01,0.5",
+                 "--physical", "-o", str(out)]) == 0
+    d = json.loads((out / "fit.json").read_text())
+    assert d["params"]["f0"] == [0.05] and max(d["params"]["ks"]) <= 1.0
+    assert d["at_bound"] == {"ks": "upper"}
+    err = capsys.readouterr().err
+    assert "warning: ks ended on its upper bound 1" in err
+    for args, message in (
+        (["--bound", "nosuch=0,1"], "no parameter 'nosuch'"),
+        (["--bound", "alpha=0.5"], "expected two numbers"),
+        (["--fix", "f0=x"], "'x' is not a number"),
+        (["--fix", "f0=2"], "outside its bounds"),
+    ):
+        assert main(["fit", str(src), "--model", "ggx", *args, "-o", str(tmp_path / "bad")]) == 2, args
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+        assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_fit_batch_takes_the_same_space():
+    truth = {"kd": [0.3, 0.2, 0.1], "ks": [1.4, 1.3, 1.2], "alpha": [0.25], "f0": [0.3]}
+    batch = [_scattered("ggx", truth, seed=s) for s in (0, 1)]
+    rs = brdffit.fit_batch(batch, "ggx", fixed={"f0": 0.3}, bounds={"alpha": (0.05, 0.5)})
+    for r in rs:
+        assert r.params["f0"].tolist() == [0.3]
+        np.testing.assert_allclose(r.params["ks"], [1.4, 1.3, 1.2], rtol=1e-4)  # ks > 1 by default
+        assert r.at_bound == {} and r.warnings == ()
+    rp = brdffit.fit_batch(batch[:1], "ggx", physical=True)[0]
+    # f0 is shared by the channels: raising it lets two of them stay below the cap.
+    assert list(rp.at_bound) == ["ks"] and rp.at_bound["ks"].startswith("upper")
+    assert np.all(rp.params["ks"] <= 1.0) and np.isclose(rp.params["ks"], 1.0).any()
