@@ -93,7 +93,9 @@ s     1         [1e-4, 1] (log)  -         0.2      roughness  width
     assert rows["ks"]["meaning"] == "scale more"
 
 
-# Bounds fixed by the papers' definitions, whatever the library's choices elsewhere.
+# Ranges fixed by the papers' definitions, whatever the library's choices elsewhere: the
+# physical range (SPEC 5: applied with physical=True; the default bounds restrict only what the
+# formula needs, so a measured albedo may exceed 1 by default).
 PINNED = [
     ("oren_nayar", "sigma", "upper", math.pi / 2),  # facet slope angle, radians: at most 90 degrees
     ("oren_nayar", "sigma", "lower", 0.0),  # sigma = 0 is Lambert
@@ -107,4 +109,5 @@ PINNED = [
 @pytest.mark.parametrize("model, param, side, value", PINNED)
 def test_bounds_fixed_by_the_papers(model, param, side, value):
     p = next(p for p in get(model).params if p.name == param)
-    assert getattr(p, side) == pytest.approx(value, rel=1e-12, abs=0)
+    lo, hi = p.physical if p.physical is not None else (p.lower, p.upper)
+    assert {"lower": lo, "upper": hi}[side] == pytest.approx(value, rel=1e-12, abs=0)
