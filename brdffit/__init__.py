@@ -35,6 +35,12 @@ _LAZY = {
     "render_sphere": "brdffit.render",
     "validate": "brdffit.render",
     "Validation": "brdffit.render",
+    "BTF": "brdffit.btf",
+    "load_btf": "brdffit.btf",
+    "fit_btf": "brdffit.btf",
+    "ParameterMaps": "brdffit.btf",
+    "validate_btf": "brdffit.btf",
+    "BTFValidation": "brdffit.btf",
 }
 
 
