@@ -174,6 +174,8 @@ def fit_btf(
                     shutil.rmtree(tiles_dir, ignore_errors=True)
         _barrier(nproc, "brdffit-fit-btf-clean")
         tiles_dir.mkdir(parents=True, exist_ok=True)
+        if pid == 0:
+            lock = _lock(tiles_dir)
         if pid == 0 and not run_file.is_file():
             tmp = run_file.with_name(f".{RUN_FILE}.tmp")
             tmp.write_text(json.dumps(run))
@@ -211,7 +213,7 @@ def fit_btf(
     maps = _assemble(btf, mdl, results)
     if nproc > 1:
         maps = _gather(maps, btf, mine)
-    info = {"btf": btf.name, "source": btf.source, "processes": nproc,
+    info = {"btf": btf.name, "source": btf.source, "btf_options": btf.meta.get("options", {}), "processes": nproc,
             "devices": [str(d) for d in jax.devices()],
             "texels_fitted_now": int(n_fitted) if nproc == 1 else None,
             "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
@@ -222,8 +224,23 @@ def fit_btf(
     if out is not None and pid == 0:
         pm.save(out, force=True)
         shutil.rmtree(tiles_dir, ignore_errors=True)
+        lock.close()
     _barrier(nproc, "brdffit-fit-btf-done")
     return pm
+
+
+def _lock(tiles_dir: Path):
+    """An exclusive lock on the run's tile folder (released when the process ends, even killed):
+    a second run writing the same place at once is refused instead of mixing tiles."""
+    import fcntl
+
+    f = open(tiles_dir / ".lock", "w")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        f.close()
+        raise UsageError(f"{tiles_dir.parent}: another fit-btf run is writing there") from None
+    return f
 
 
 def _default_solver() -> str:

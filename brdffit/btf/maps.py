@@ -73,7 +73,9 @@ class ParameterMaps:
         import OpenEXR
 
         head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
-                "brdffit_model": self.model, "brdffit_loss": self.loss_name, "brdffit_solver": self.solver}
+                "brdffit_model": self.model, "brdffit_loss": self.loss_name, "brdffit_solver": self.solver,
+                # how the BTF was read (region, step, scale ...), so that validate-btf reads it alike
+                "brdffit_btf_options": json.dumps(self.info.get("btf_options", {}), default=_plain)}
         parts = []
         for name, a in self.maps().items():
             a = np.ascontiguousarray(a, np.float32)
@@ -124,13 +126,15 @@ class ParameterMaps:
             params[p.name] = arrays[p.name]
         return cls(model=model, params=params, loss=arrays["loss"][..., 0], converged=arrays["converged"][..., 0] > 0.5,
                    steps=arrays["steps"][..., 0].astype(int), loss_name=str(head.get("brdffit_loss", "")),
-                   solver=str(head.get("brdffit_solver", "")), info={"file": str(path)})
+                   solver=str(head.get("brdffit_solver", "")),
+                   info={"file": str(path), "btf_options": json.loads(str(head.get("brdffit_btf_options", "{}")) or "{}")})
 
     def save(self, folder, force: bool = False) -> list[Path]:
-        """params.exr, preview_<name>.png, maps.png, summary.json in ``folder`` (each atomic)."""
+        """preview_<name>.png, maps.png, summary.json and params.exr in ``folder``, each atomic;
+        params.exr last, so that its presence means a complete result."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        files = [self.save_exr(folder / "params.exr", force=force)]
+        files = []
         for name, a in self.maps().items():
             target = folder / f"preview_{name}.png"
             with atomic_file(target, force=force, suffix=".png") as tmp:
@@ -142,6 +146,7 @@ class ParameterMaps:
         with atomic_file(folder / "summary.json", force=force, suffix=".json") as tmp:
             tmp.write_text(json.dumps(self.summary(), indent=2, default=_plain) + "\n")
         files.append(folder / "summary.json")
+        files.append(self.save_exr(folder / "params.exr", force=force))
         return files
 
     # display ------------------------------------------------------------------------------------
