@@ -105,7 +105,10 @@ def _writer(fmt: str, exposure: float):
         def write(img, target):
             code = np.round(linear_to_srgb(np.asarray(img, np.float64) * exposure) * 255).astype(np.uint8)
             code = code[..., 0] if code.shape[-1] == 1 else code
-            Image.fromarray(code).save(target, quality=95) if fmt == "jpg" else Image.fromarray(code).save(target)
+            if fmt == "jpg":  # 4:4:4: no chroma subsampling (it would blur colours across texels)
+                Image.fromarray(code).save(target, format="JPEG", quality=100, subsampling=0)
+            else:
+                Image.fromarray(code).save(target, format="PNG")
 
         return write
     raise UsageError(f"unknown image format {fmt!r}; known: {', '.join(FORMATS)}")

@@ -65,12 +65,16 @@ def decode_hdr(data: bytes) -> np.ndarray:
                     count = data[pos]
                     if count > 128:
                         count -= 128
+                        if pos + 1 >= n:
+                            raise ValueError(f"truncated pixel data in scanline {row}")
                         if x + count > w:
                             raise ValueError(f"scanline {row}: run overflows the line")
                         out[row, x : x + count, c] = data[pos + 1]
                         pos += 2
                     else:
-                        if count == 0 or x + count > w or pos + 1 + count > n:
+                        if pos + 1 + count > n:
+                            raise ValueError(f"truncated pixel data in scanline {row}")
+                        if count == 0 or x + count > w:
                             raise ValueError(f"scanline {row}: bad run")
                         out[row, x : x + count, c] = np.frombuffer(buf[pos + 1 : pos + 1 + count], np.uint8)
                         pos += 1 + count
