@@ -85,7 +85,10 @@ def texel_brdf(maps: ParameterMaps):
     from .. import models
     from ..fitting.problem import resolve_model
 
-    mdl = resolve_model(models.get(maps.model), 3)
+    base = models.get(maps.model)
+    # maps fitted to a one-channel BTF hold one value per colour parameter: render them grey
+    grey = all(np.shape(maps.params[p.name])[-1] == 1 for p in base.params if p.channels == 3)
+    mdl = resolve_model(base, 1 if grey else 3)
     h, w = maps.shape
     table = np.concatenate([np.asarray(maps.params[p.name], np.float64).reshape(h * w, -1) for p in mdl.params], axis=1)
     table = jnp.asarray(table)
