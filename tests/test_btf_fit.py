@@ -98,6 +98,7 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
         np.testing.assert_array_equal(maps.params[k], fresh.params[k])
     np.testing.assert_array_equal(maps.loss, fresh.loss)
     assert (out / "params.exr").is_file() and not (out / "tiles").exists()
+    assert maps._repr_png_().startswith(b"\x89PNG") and "<table>" in maps._repr_html_()
     back = ParameterMaps.load(out / "params.exr")
     np.testing.assert_allclose(back.params["kd"], fresh.params["kd"], rtol=1e-6)  # float32 file
     # a finished result is not replaced without force; another run's tiles are refused
