@@ -43,6 +43,8 @@ from .maps import ParameterMaps
 from .reader import BTF
 
 RUN_FILE = "run.json"
+#: Texels per call of fit_batch (bounds its memory; see _fit_tile).
+GROUP = 16
 
 
 def _tile_file(folder: Path, t: int) -> Path:
@@ -57,11 +59,16 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict) -> dict[str
     h, w = values.shape[:2]
     ms = [btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]")
           for r in range(h) for c in range(w)]
-    # Edge tiles are smaller: pad them (repeating a texel) to a full tile, so that every call of
-    # fit_batch has one shape and compiles once.
+    # fit_batch in groups of GROUP texels: its initialisation grid holds every texel of a call at
+    # once (measured: 64 ggx texels per call, 6.6 GB peak; 256, killed). The last group is padded
+    # (repeating a texel), so that every call has one shape and compiles once.
     n = len(ms)
-    ms += ms[-1:] * (btf.tile * btf.tile - n)
-    results = fit_batch(ms, mdl, loss=loss, **batch_options)[:n]
+    group = min(GROUP, btf.tile * btf.tile)
+    ms += ms[-1:] * (-n % group)
+    results = []
+    for s in range(0, len(ms), group):
+        results += fit_batch(ms[s : s + group], mdl, loss=loss, **batch_options)
+    results = results[:n]
     out = {f"param:{p.name}": np.stack([np.asarray(res.params[p.name], np.float64) for res in results]).reshape(h, w, -1)
            for p in mdl.params}
     out["loss"] = np.array([res.loss_value for res in results]).reshape(h, w)
