@@ -38,6 +38,12 @@ _LAZY = {
     "mitsuba_bsdf": "brdffit.render.export",
     "register_mitsuba": "brdffit.render.export",
     "evaluated_calls": "brdffit._mitsuba",
+    "BTF": "brdffit.btf",
+    "load_btf": "brdffit.btf",
+    "fit_btf": "brdffit.btf",
+    "ParameterMaps": "brdffit.btf",
+    "validate_btf": "brdffit.btf",
+    "BTFValidation": "brdffit.btf",
 }
 
 

@@ -70,7 +70,9 @@ def _post(model, loss):
 
 
 def _shard(tree):
-    devices = jax.devices()
+    # This process's devices: under jax.distributed, jax.devices() also lists other processes'
+    # devices, which this process cannot put its data on (fit_btf gives each process its own texels).
+    devices = jax.local_devices()
     if len(devices) == 1:
         return tree
     from jax.sharding import Mesh, NamedSharding, PartitionSpec

@@ -37,11 +37,13 @@ from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_angles_deg, ubo_index, ubo_pairs
 from ..measurement import Measurement
 
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".exr")
-_ANGLES = r"tl(?P<tl>\d{3})_pl(?P<pl>\d{3})"
-FULL_NAME = re.compile(rf"^(?:(?P<prefix>.*?)_)?{_ANGLES}_tv(?P<tv>\d{{3}})_pv(?P<pv>\d{{3}})$", re.IGNORECASE)
-SHORT_NAME = re.compile(rf"^(?:(?P<prefix>.*?)_)?{_ANGLES}$", re.IGNORECASE)
-VIEW_DIR = re.compile(r"^tv(?P<tv>\d{3})_pv(?P<pv>\d{3})$", re.IGNORECASE)
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".exr", ".hdr")
+# Fields are separated by "_" or, as in the Bonn database's zip archives, by spaces
+# ("tl015 pl060 tv000 pv000.jpg"); both forms are accepted everywhere.
+_ANGLES = r"tl(?P<tl>\d{3})[_ ]pl(?P<pl>\d{3})"
+FULL_NAME = re.compile(rf"^(?:(?P<prefix>.*?)[_ ])?{_ANGLES}[_ ]tv(?P<tv>\d{{3}})[_ ]pv(?P<pv>\d{{3}})$", re.IGNORECASE)
+SHORT_NAME = re.compile(rf"^(?:(?P<prefix>.*?)[_ ])?{_ANGLES}$", re.IGNORECASE)
+VIEW_DIR = re.compile(r"^tv(?P<tv>\d{3})[_ ]pv(?P<pv>\d{3})$", re.IGNORECASE)
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -127,8 +129,17 @@ def collect(folder: Path) -> dict[tuple[int, int], Path]:
 
 
 def read_image(f: Path, *, srgb: bool = True) -> np.ndarray:
-    """Linear (H, W, C) float64 of one image (C = 1 or 3)."""
-    if f.suffix.lower() == ".exr":
+    """Linear (H, W, C) float64 of one image (C = 1 or 3).
+
+    ``f``: a path, or an open binary file with a ``name`` (a member of a zip archive) for every
+    type but EXR. Radiance ``.hdr`` (RGBE) images are linear already.
+    """
+    suffix = Path(getattr(f, "name", f)).suffix.lower()
+    if suffix == ".hdr":
+        from .hdr import read_hdr
+
+        return read_hdr(f)
+    if suffix == ".exr":
         import OpenEXR
 
         exr = OpenEXR.File(str(f), separate_channels=True)

@@ -1,0 +1,78 @@
+"""Throughput of ``brdffit.fit_btf`` (SPEC 7, issue 11).
+
+A generated ``ggx`` BTF (default 64 x 64 texels, smooth parameter maps, 1% noise, EXR images in a
+temporary folder) is read with ``load_btf`` and fitted with ``fit_btf``; in the same run a loop of
+``brdffit.fit`` over a sample of its texels gives the baseline. Printed: the device(s) JAX runs
+on, texels/s of both (compile included for fit_btf, as a user sees it; the loop is warmed up
+first), their ratio, the losses' agreement on the sampled texels, the process's peak resident
+memory and the BTF's memory figures.
+
+    python benchmarks/bench_btf.py [--size 64] [--loop 16] [--model ggx] [--tile 16]
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", type=int, default=64, help="texels per side")
+    ap.add_argument("--loop", type=int, default=16, help="texels fitted one by one with fit() for the baseline")
+    ap.add_argument("--model", default="ggx")
+    ap.add_argument("--tile", type=int, default=16)
+    args = ap.parse_args()
+
+    import jax
+
+    import brdffit
+    from brdffit.btf import generate as gen
+
+    print(f"devices: {jax.devices()} ({jax.process_count()} process(es))")
+    model = brdffit.models.get(args.model)
+    with tempfile.TemporaryDirectory(prefix="bench-btf-") as d:
+        t = time.perf_counter()
+        truth = gen.smooth_maps(model, args.size, args.size, seed=1)
+        folder = gen.write_model_btf(Path(d) / "btf", model, truth, noise=0.01, seed=2)
+        print(f"generated {args.size}x{args.size} {args.model} BTF in {time.perf_counter() - t:.1f} s")
+        t = time.perf_counter()
+        btf = brdffit.load_btf(folder, tile=args.tile, cache_dir=Path(d) / "cache")
+        read_s = time.perf_counter() - t
+        mem = btf.memory()
+        print(f"load_btf: {read_s:.1f} s; cache file {mem['cache_file'] / 2**20:.1f} MB, read buffer "
+              f"{mem['read_buffer'] / 2**20:.1f} MB, one tile {mem['tile'] / 2**20:.1f} MB; peak RSS {peak_rss_mb():.0f} MB")
+
+        rng = np.random.default_rng(0)
+        sample = [tuple(x) for x in rng.integers(0, args.size, (args.loop, 2))]
+        brdffit.fit(btf.texel(*sample[0]), model)  # warm-up: compile outside the timing
+        t = time.perf_counter()
+        singles = [brdffit.fit(btf.texel(r, c), model) for r, c in sample]
+        loop_s = time.perf_counter() - t
+        loop_rate = len(sample) / loop_s
+        print(f"loop of fit(): {len(sample)} texels in {loop_s:.1f} s = {loop_rate:.2f} texels/s (warm)")
+
+        t = time.perf_counter()
+        maps = brdffit.fit_btf(btf, model, progress=False)
+        fit_s = time.perf_counter() - t
+        n = args.size * args.size
+        rate = n / fit_s
+        print(f"fit_btf: {n} texels in {fit_s:.1f} s = {rate:.2f} texels/s (compile included); "
+              f"{int(maps.converged.sum())}/{n} converged")
+        print(f"ratio fit_btf / loop of fit: {rate / loop_rate:.2f}x   (target >= 100 texels/s, aim 300)")
+        dev = [abs(maps.loss[r, c] - s.loss_value) / s.loss_value for (r, c), s in zip(sample, singles)]
+        print(f"loss of fit_btf vs fit on the sampled texels: max relative difference {max(dev):.2e}")
+        print(f"peak RSS of this process: {peak_rss_mb():.0f} MB")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,27 @@
+"""Per-texel fitting of UBO BTFs (SPEC 7): read (:func:`load_btf`), fit (:func:`fit_btf` ->
+:class:`ParameterMaps`), validate against the BTF's own photographs (:func:`validate_btf`), and
+generated test BTFs (:mod:`brdffit.btf.generate`)."""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "BTF": "brdffit.btf.reader",
+    "load_btf": "brdffit.btf.reader",
+    "ParameterMaps": "brdffit.btf.maps",
+    "fit_btf": "brdffit.btf.fit",
+    "validate_btf": "brdffit.btf.validate",
+    "BTFValidation": "brdffit.btf.validate",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'brdffit.btf' has no attribute {name!r}")
+
+
+__all__ = list(_LAZY)

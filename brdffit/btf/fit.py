@@ -1,0 +1,305 @@
+"""``brdffit.fit_btf``: every texel of a BTF fitted on its own (SPEC 7).
+
+The work unit is a *tile* of the BTF's cache (16 x 16 texels by default, see
+:mod:`brdffit.btf.reader`): its texels are read with one sequential read and fitted together by
+``brdffit.fit_batch`` (batched, vmapped, spread over the process's JAX devices), so the fit
+becomes as fast as ``fit_batch`` is.
+
+Resuming. With ``out=DIR``, every finished tile is written at once (atomically) to
+``DIR/tiles/tile_NNNNN.npz``, beside ``DIR/tiles/run.json`` which identifies the run (the BTF's
+content signature, model, loss, solver and options). A run that finds tiles of the same run
+there fits only the missing ones; tiles of a different run are an error unless ``force``. When
+all tiles are done the results (``params.exr``, previews, ``summary.json``, see
+:mod:`brdffit.btf.maps`) are written and the tiles removed.
+
+Several processes (``jax.distributed``). When JAX runs several processes (after
+``jax.distributed.initialize(...)``, e.g. one per machine or per GPU, started by the user's
+launcher: SLURM, mpirun, Kubernetes, or by hand), process p of n fits the tiles t with
+t % n == p on its own devices, then the maps are gathered (``multihost_utils.process_allgather``)
+so that every process returns the whole ``ParameterMaps``; process 0 alone writes the files.
+Every process must be able to read the BTF (a shared file system, or its own copy). The fitted
+numbers do not depend on the split: each texel is fitted by the same compiled code from the same
+data, so one process and several give identical maps.
+
+Neighbouring texels' results as starts: not used yet: ``fit_batch`` takes no starts (it runs its
+initialisation grid for every texel). When it does, tile t can start from its fitted neighbour's
+border texels; the grid is most of a texel's cost today.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UsageError
+from ..fitting.problem import resolve_model
+from .maps import ParameterMaps
+from .reader import BTF
+
+RUN_FILE = "run.json"
+#: Texels per call of fit_batch (bounds its memory; see _fit_tile).
+GROUP = 16
+
+
+def _tile_file(folder: Path, t: int) -> Path:
+    return folder / f"tile_{t:05d}.npz"
+
+
+def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict) -> dict[str, np.ndarray]:
+    """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps."""
+    from ..fitting import fit_batch
+
+    values = btf.tile_values(t)  # (h, w, 6561, C) float32
+    h, w = values.shape[:2]
+    ms = [btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]")
+          for r in range(h) for c in range(w)]
+    # fit_batch in groups of GROUP texels: its initialisation grid holds every texel of a call at
+    # once (measured: 64 ggx texels per call, 6.6 GB peak; 256, killed). The last group is padded
+    # (repeating a texel), so that every call has one shape and compiles once.
+    n = len(ms)
+    group = min(GROUP, btf.tile * btf.tile)
+    ms += ms[-1:] * (-n % group)
+    results = []
+    for s in range(0, len(ms), group):
+        results += fit_batch(ms[s : s + group], mdl, loss=loss, **batch_options)
+    results = results[:n]
+    out = {f"param:{p.name}": np.stack([np.asarray(res.params[p.name], np.float64) for res in results]).reshape(h, w, -1)
+           for p in mdl.params}
+    out["loss"] = np.array([res.loss_value for res in results]).reshape(h, w)
+    out["converged"] = np.array([res.converged for res in results]).reshape(h, w)
+    out["steps"] = np.array([res.steps for res in results]).reshape(h, w)
+    return out
+
+
+def _save_tile(folder: Path, t: int, arrays: dict) -> None:
+    target = _tile_file(folder, t)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    os.replace(tmp, target)
+
+
+def _load_tile(folder: Path, t: int) -> dict | None:
+    f = _tile_file(folder, t)
+    if not f.is_file():
+        return None
+    try:
+        with np.load(f) as z:
+            return {k: z[k] for k in z.files}
+    except Exception:  # noqa: BLE001 - a damaged tile is fitted again
+        return None
+
+
+class _Progress:
+    """rich progress bar: texels done, texels/s, time left (on a terminal, or when forced)."""
+
+    def __init__(self, enabled: bool, total: int, done: int, label: str):
+        self.bar = None
+        if not enabled:
+            return
+        from rich.console import Console
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, ProgressColumn, TextColumn,
+                                   TimeElapsedColumn, TimeRemainingColumn)
+        from rich.text import Text
+
+        class Speed(ProgressColumn):
+            def render(self, task):
+                return Text(f"{task.speed:.1f} texels/s" if task.speed else "- texels/s")
+
+        self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), Speed(),
+                            TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(),
+                            console=Console(stderr=True), transient=False)
+        self.bar.start()
+        self.task = self.bar.add_task(label, total=total, completed=done)
+
+    def advance(self, n: int) -> None:
+        if self.bar is not None:
+            self.bar.advance(self.task, n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+def fit_btf(
+    btf: BTF,
+    model,
+    *,
+    loss: str = "log",
+    solver: str | None = None,
+    out=None,
+    force: bool = False,
+    progress: bool | None = None,
+    max_tiles: int | None = None,
+    **batch_options,
+) -> ParameterMaps:
+    """Fit ``model`` to every texel of ``btf``; see the module docstring.
+
+    ``solver`` and further keyword arguments (``max_steps``, ``rtol``, ``atol``, ``chunk`` ...) go
+    to ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
+    the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
+    ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
+    splitting work by hand).
+    """
+    import jax
+
+    from ..fitting.losses import check_loss
+
+    if not isinstance(btf, BTF):
+        raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
+    loss = check_loss(loss)
+    mdl = resolve_model(model, btf.channels)
+    if solver is not None:
+        batch_options["solver"] = solver
+    run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},
+           "tile": btf.tile, "shape": [btf.height, btf.width]}
+    pid, nproc = jax.process_index(), jax.process_count()
+
+    tiles_dir = None
+    if out is not None:
+        out = Path(out)
+        if (out / "params.exr").exists() and not force:
+            raise UsageError(f"{out}: already holds a fit (use --force / force=True to replace it)")
+        tiles_dir = out / "tiles"
+        run_file = tiles_dir / RUN_FILE
+        if run_file.is_file():
+            try:
+                previous = json.loads(run_file.read_text())
+            except (OSError, ValueError):
+                previous = None
+            if previous != run:
+                if not force:
+                    raise UsageError(f"{tiles_dir}: holds tiles of another run (other BTF, model or options); "
+                                     "use --force / force=True to start again")
+                if pid == 0:
+                    shutil.rmtree(tiles_dir, ignore_errors=True)
+        _barrier(nproc, "brdffit-fit-btf-clean")
+        tiles_dir.mkdir(parents=True, exist_ok=True)
+        if pid == 0:
+            lock = _lock(tiles_dir)
+        if pid == 0 and not run_file.is_file():
+            tmp = run_file.with_name(f".{RUN_FILE}.tmp")
+            tmp.write_text(json.dumps(run))
+            os.replace(tmp, run_file)
+
+    mine = [t for t in range(btf.n_tiles) if t % nproc == pid]
+    results: dict[int, dict] = {}
+    for t in mine:
+        if tiles_dir is not None:
+            got = _load_tile(tiles_dir, t)
+            if got is not None:
+                results[t] = got
+    todo = [t for t in mine if t not in results]
+    sizes = {t: (lambda b: (b[1] - b[0]) * (b[3] - b[2]))(btf.tile_box(t)) for t in mine}
+    enabled = sys.stderr.isatty() if progress is None else bool(progress)
+    label = f"{mdl.name} on {btf.name}" + (f" (process {pid + 1}/{nproc})" if nproc > 1 else "")
+    bar = _Progress(enabled, sum(sizes.values()), sum(sizes[t] for t in results), label)
+    t0 = time.perf_counter()
+    fitted = 0
+    try:
+        for t in todo:
+            if max_tiles is not None and fitted >= max_tiles:
+                return None
+            arrays = _fit_tile(btf, t, mdl, loss, batch_options)
+            if tiles_dir is not None:
+                _save_tile(tiles_dir, t, arrays)
+            results[t] = arrays
+            fitted += 1
+            bar.advance(sizes[t])
+    finally:
+        bar.close()
+    seconds = time.perf_counter() - t0
+    n_fitted = sum(sizes[t] for t in todo)
+
+    maps = _assemble(btf, mdl, results)
+    if nproc > 1:
+        maps = _gather(maps, btf, mine)
+    info = {"btf": btf.name, "source": btf.source, "btf_options": btf.meta.get("options", {}), "processes": nproc,
+            "devices": [str(d) for d in jax.devices()],
+            "texels_fitted_now": int(n_fitted) if nproc == 1 else None,
+            "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
+            "resumed_tiles": len(mine) - len(todo)}
+    pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],
+                       steps=maps["steps"], loss_name=loss, solver=str(batch_options.get("solver", _default_solver())),
+                       info=info)
+    if out is not None and pid == 0:
+        pm.save(out, force=True)
+        shutil.rmtree(tiles_dir, ignore_errors=True)
+        lock.close()
+    _barrier(nproc, "brdffit-fit-btf-done")
+    return pm
+
+
+def _lock(tiles_dir: Path):
+    """An exclusive lock on the run's tile folder (released when the process ends, even killed):
+    a second run writing the same place at once is refused instead of mixing tiles."""
+    import fcntl
+
+    f = open(tiles_dir / ".lock", "w")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        f.close()
+        raise UsageError(f"{tiles_dir.parent}: another fit-btf run is writing there") from None
+    return f
+
+
+def _default_solver() -> str:
+    import inspect
+
+    from ..fitting import fit_batch
+
+    return str(inspect.signature(fit_batch).parameters["solver"].default)
+
+
+def _assemble(btf: BTF, mdl, results: dict[int, dict]) -> dict:
+    h, w = btf.shape
+    params = {p.name: np.zeros((h, w, mdl.size(p))) for p in mdl.params}
+    loss = np.zeros((h, w))
+    conv = np.zeros((h, w), bool)
+    steps = np.zeros((h, w), int)
+    for t, a in results.items():
+        r0, r1, c0, c1 = btf.tile_box(t)
+        for p in mdl.params:
+            params[p.name][r0:r1, c0:c1] = a[f"param:{p.name}"]
+        loss[r0:r1, c0:c1] = a["loss"]
+        conv[r0:r1, c0:c1] = a["converged"]
+        steps[r0:r1, c0:c1] = a["steps"]
+    return {"params": params, "loss": loss, "converged": conv, "steps": steps}
+
+
+def _gather(maps: dict, btf: BTF, mine: list[int]) -> dict:
+    """Every process's tiles into one set of maps, on every process (a sum of disjoint parts)."""
+    from jax.experimental import multihost_utils
+
+    owned = np.zeros(btf.shape, bool)
+    for t in mine:
+        r0, r1, c0, c1 = btf.tile_box(t)
+        owned[r0:r1, c0:c1] = True
+    flat = {"owned": owned.astype(np.float64), "loss": maps["loss"], "converged": maps["converged"].astype(np.float64),
+            "steps": maps["steps"].astype(np.float64), **{f"param:{k}": v for k, v in maps["params"].items()}}
+    every = multihost_utils.process_allgather(flat)  # each (n_processes, ...)
+    if not np.all(every["owned"].sum(axis=0) == 1):
+        raise RuntimeError("fit_btf: the processes' tiles do not cover the BTF exactly once")
+
+    def pick(a):
+        own = every["owned"].astype(bool)
+        own = own.reshape(own.shape + (1,) * (a.ndim - own.ndim))
+        return np.where(own, a, 0).sum(axis=0)
+
+    return {"params": {k[6:]: pick(v) for k, v in every.items() if k.startswith("param:")},
+            "loss": pick(every["loss"]), "converged": pick(every["converged"]) > 0.5,
+            "steps": np.rint(pick(every["steps"])).astype(int)}
+
+
+def _barrier(nproc: int, name: str) -> None:
+    if nproc > 1:
+        from jax.experimental import multihost_utils
+
+        multihost_utils.sync_global_devices(name)

@@ -1,0 +1,320 @@
+"""``brdffit.validate_btf``: fitted parameter maps rendered in Mitsuba 3 beside the BTF's own
+photographs (SPEC 7).
+
+The scene holds only what this comparison needs: a square (Mitsuba's ``rectangle``, [-1, 1]^2 in
+the plane z = 0, normal +z, texture coordinates u = (x + 1)/2, v = (y + 1)/2) carrying the maps, an
+orthographic camera, one directional light, the ``direct`` integrator sampling emitters only, a
+box filter and one sample per pixel at its centre (stratified, no jitter).
+
+Geometry. A BTF photograph of the pair (light, view) is *rectified*: texel (r, c) of the texture
+at pixel (r, c), whatever the view. So the camera looks along -view, but its film is sheared
+onto the square: its to-world transform maps film x, y to world x, y (as a camera on +z would)
+and its z axis to -view, so every ray leaves the point (x, y) + 3 view towards -view and hits the
+square at (x, y). The image is then rectified exactly like the photograph, one pixel per texel,
+and every pixel sees the view direction of the pair. The light is directional along the pair's
+light direction with irradiance 1 / cos(theta_light) on a surface facing it, so a pixel's
+radiance, f_r(l, v) cos(theta_light) / cos(theta_light), is f_r itself: the quantity the BTF
+stores (``load_btf`` already divides out cos(theta_light) for ``includes_cos`` data).
+
+The BSDF evaluates the model's own JAX formula (``model.eval``, the one definition) with each
+lane's texel parameters: it reuses the callback BSDF of :mod:`brdffit.render.bsdf` (evaluated
+Dr.Jit calls, the SPEC 1 direction conventions at the boundary) and adds the texture lookup
+(nearest texel of ``si.uv``; row 0 at the top, v = 1).
+
+Metrics per pair (:mod:`brdffit.render.metrics`): RMSE and relative RMSE of f_r over the texels,
+PSNR and FLIP of the tone-mapped images (exposure from the photograph). Files (``out``, atomic):
+``photo_<pair>.exr``, ``render_<pair>.exr`` (linear f_r), ``panel_<pair>.png`` (photograph |
+render | error), ``metrics.json``. ``<pair>`` is ``tlTTT_plPPP_tvTTT_pvPPP``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._files import atomic_dir
+from ..errors import UsageError
+from ..grid import UBO_SIZE, ubo_directions, ubo_index
+from ..io.images import direction_name
+from .maps import ParameterMaps
+from .reader import BTF
+
+#: Default (light, view) pairs in degrees ((theta, phi), (theta, phi)): head-on, two mirror
+#: configurations (the specular peak), an off-specular and a grazing one.
+DEFAULT_PAIRS_DEG = (
+    ((0, 0), (0, 0)),
+    ((30, 0), (30, 180)),
+    ((45, 60), (15, 240)),
+    ((60, 90), (60, 270)),
+    ((75, 0), (45, 100)),
+)
+#: Lanes per call of the jitted per-texel model (one compilation serves every render).
+CHUNK = 1 << 14
+
+
+def pair_indices(pairs) -> list[tuple[int, int]]:
+    """(light, view) UBO indices from index pairs, or from ((tl, pl), (tv, pv)) degree pairs."""
+    out = []
+    for p in pairs:
+        a, b = p
+        if np.ndim(a) == 0 and np.ndim(b) == 0:
+            light, view = int(a), int(b)
+            if not (0 <= light < UBO_SIZE and 0 <= view < UBO_SIZE):
+                raise UsageError(f"pair {p}: indices must be in 0..80")
+        else:
+            try:
+                light, view = ubo_index(int(a[0]), int(a[1])), ubo_index(int(b[0]), int(b[1]))
+            except KeyError:
+                raise UsageError(f"pair {p}: not a direction pair of the UBO-81 grid (degrees)") from None
+        out.append((light, view))
+    if not out:
+        raise UsageError("no (light, view) pairs to validate")
+    return out
+
+
+def texel_brdf(maps: ParameterMaps):
+    """(uv (N, 2), wi (N, 3), wo (N, 3)) -> f_r (N, 3): the model at the nearest texel's parameters."""
+    import jax
+    import jax.numpy as jnp
+
+    from .. import models
+    from ..fitting.problem import resolve_model
+
+    base = models.get(maps.model)
+    # maps fitted to a one-channel BTF hold one value per colour parameter: render them grey
+    grey = all(np.shape(maps.params[p.name])[-1] == 1 for p in base.params if p.channels == 3)
+    mdl = resolve_model(base, 1 if grey else 3)
+    h, w = maps.shape
+    table = np.concatenate([np.asarray(maps.params[p.name], np.float64).reshape(h * w, -1) for p in mdl.params], axis=1)
+    table = jnp.asarray(table)
+
+    @jax.jit
+    def f(index, wi, wo):
+        v = table[index]
+        return jax.vmap(lambda vv, a, b: mdl.eval(mdl.unflatten(vv), a[None], b[None])[0])(v, wi, wo)
+
+    def brdf(uv, wi, wo):
+        n = uv.shape[0]
+        col = np.clip(np.floor(uv[:, 0] * w).astype(int), 0, w - 1)
+        row = np.clip(np.floor((1.0 - uv[:, 1]) * h).astype(int), 0, h - 1)
+        index = row * w + col
+        out = np.empty((n, mdl.channels))
+        for s in range(0, n, CHUNK):
+            e = min(n, s + CHUNK)
+            pad = CHUNK - (e - s)
+            idx = np.concatenate([index[s:e], np.zeros(pad, int)])
+            a = np.concatenate([wi[s:e], np.tile([[0.0, 0.0, 1.0]], (pad, 1))])
+            b = np.concatenate([wo[s:e], np.tile([[0.0, 0.0, 1.0]], (pad, 1))])
+            out[s:e] = np.asarray(f(jnp.asarray(idx), jnp.asarray(a), jnp.asarray(b)))[: e - s]
+        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
+
+    return brdf
+
+
+@functools.cache
+def _textured_class():
+    """A subclass of the callback BSDF whose f_r also depends on the texture coordinates."""
+    from ..render.bsdf import _callback_class, _vec_to_numpy
+    from .._mitsuba import mitsuba
+
+    mi = mitsuba()
+    import drjit as dr
+
+    scalar = mi.variant().startswith("scalar")
+    base = _callback_class()
+
+    class TexturedBSDF(base):
+        def __init__(self, props, brdf_uv=None, label: str = "texture"):
+            base.__init__(self, props, brdf=None, label=label)
+            self.brdf_uv = brdf_uv
+
+        def _eval_cos(self, si, wo, active):
+            # Mitsuba: si.wi = view, wo = light (SPEC 1 conversion as in the base class).
+            if scalar:
+                light = np.array([[wo.x, wo.y, wo.z]], np.float64)
+                view = np.array([[si.wi.x, si.wi.y, si.wi.z]], np.float64)
+                uv = np.array([[si.uv.x, si.uv.y]], np.float64)
+            else:
+                light, view = _vec_to_numpy(wo), _vec_to_numpy(si.wi)
+                uv = np.stack([np.asarray(si.uv.x, np.float64), np.asarray(si.uv.y, np.float64)], -1).reshape(-1, 2)
+            up = (light[:, 2] > 0) & (view[:, 2] > 0)
+            value = np.zeros((light.shape[0], 3))
+            if up.any():
+                value[up] = np.asarray(self.brdf_uv(uv[up], light[up], view[up]), np.float64) * light[up, 2:3]
+            if scalar:
+                return mi.Color3f(*map(float, value[0])) if active else mi.Color3f(0.0)
+            v32 = value.astype(np.float32)
+            col = mi.Color3f(mi.Float(v32[:, 0]), mi.Float(v32[:, 1]), mi.Float(v32[:, 2]))
+            return dr.select(active, col, mi.Color3f(0.0))
+
+    return TexturedBSDF
+
+
+def textured_bsdf(maps: ParameterMaps):
+    """A Mitsuba BSDF rendering ``maps`` (per-texel parameters of the model's JAX formula)."""
+    from .._mitsuba import mitsuba
+    from ..render.bsdf import import_native
+
+    import_native()
+    mi = mitsuba()
+    return _textured_class()(mi.Properties(), brdf_uv=texel_brdf(maps), label=f"{maps.model} maps")
+
+
+def _camera_to_world(mi, view: np.ndarray):
+    """Orthographic camera whose film covers [-1, 1]^2 of the square, rays along -view (sheared)."""
+    base = np.asarray(mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]).matrix, np.float64)
+    m = base.copy()
+    m[:3, 2] = -view  # the camera's z axis: the direction its rays travel
+    m[:3, 3] = 3.0 * view
+    return mi.ScalarTransform4f(m.tolist())
+
+
+def scene_dict(bsdf, height: int, width: int, light: np.ndarray, view: np.ndarray) -> dict:
+    from .._mitsuba import mitsuba
+    from ..render.scene import _light_to_world
+
+    mi = mitsuba()
+    return {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "sensor": {
+            "type": "orthographic",
+            "to_world": _camera_to_world(mi, view),
+            "film": {"type": "hdrfilm", "width": int(width), "height": int(height), "pixel_format": "rgb",
+                     "rfilter": {"type": "box"}},
+            "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
+        },
+        "square": {"type": "rectangle", "bsdf": bsdf},
+        "light": {"type": "directional", "to_world": _light_to_world(mi, light),
+                  "irradiance": {"type": "rgb", "value": float(1.0 / light[2])}},
+    }
+
+
+def render_maps(maps: ParameterMaps, pairs) -> np.ndarray:
+    """f_r images (P, H, W, 3) of the maps rendered for each (light, view) pair (indices or degrees)."""
+    from .._mitsuba import mitsuba
+    from ..render.bsdf import evaluated_calls
+    mi = mitsuba()
+    idx = pair_indices(pairs)
+    dirs = ubo_directions()
+    h, w = maps.shape
+    bsdf = textured_bsdf(maps)
+    out = np.zeros((len(idx), h, w, 3), np.float32)
+    with evaluated_calls():
+        for k, (light, view) in enumerate(idx):
+            # A scene per pair (the camera's shear and the light change); the BSDF is made once.
+            scene = mi.load_dict(scene_dict(bsdf, h, w, dirs[light], dirs[view]))
+            out[k] = np.asarray(mi.render(scene, spp=1, seed=0))[..., :3]
+    return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BTFValidation:
+    pairs: list  # (light, view) indices
+    photos: np.ndarray  # (P, H, W, 3) f_r of the BTF
+    renders: np.ndarray  # (P, H, W, 3)
+    metrics: dict  # "pairs": [...], "overall": {...}
+    files: tuple
+    seconds: dict
+
+    def __repr__(self) -> str:
+        o = self.metrics["overall"]
+        return (f"BTFValidation({len(self.pairs)} pairs: rmse {o['rmse']:.4g}, psnr {o['psnr']:.2f} dB "
+                f"(worst {o['psnr_min']:.2f}), flip {o['flip']:.4f})")
+
+    def _repr_png_(self) -> bytes:
+        import io
+
+        fig = _panel_figure(self.photos, self.renders, [direction_name(*p) for p in self.pairs], self.metrics["pairs"])
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        return buf.getvalue()
+
+
+def _panel_figure(photos, renders, names, metrics):
+    from matplotlib.figure import Figure
+
+    from ..render.metrics import exposure, tonemap
+
+    n = len(names)
+    fig = Figure(figsize=(9.5, 3.0 * n), dpi=90)
+    for k in range(n):
+        scale = exposure(photos[k])
+        err = np.abs(np.asarray(renders[k], np.float64) - photos[k]).mean(axis=-1)
+        ref_level = 1.0 / scale
+        for j, (img, title) in enumerate(((tonemap(photos[k], scale), "BTF photograph"),
+                                          (tonemap(renders[k], scale), "render of the maps"))):
+            ax = fig.add_subplot(n, 3, 3 * k + j + 1)
+            ax.imshow(img, interpolation="nearest")
+            ax.set_title(f"{title}\n{names[k]}", fontsize=8)
+            ax.axis("off")
+        ax = fig.add_subplot(n, 3, 3 * k + 3)
+        im = ax.imshow(err / ref_level, cmap="magma", vmin=0, vmax=max(float(np.percentile(err / ref_level, 99)), 1e-6),
+                       interpolation="nearest")
+        fig.colorbar(im, ax=ax, fraction=0.046)
+        m = metrics[k]
+        ax.set_title(f"|error| / exposure level\npsnr {m['psnr']:.1f} dB, flip {m['flip']:.3f}", fontsize=8)
+        ax.axis("off")
+    fig.tight_layout()
+    return fig
+
+
+def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bool = False) -> BTFValidation:
+    """Render ``maps`` (ParameterMaps or a params.exr path) for each (light, view) pair and compare
+    with ``btf``'s photographs; see the module docstring."""
+    from ..render.metrics import image_metrics
+
+    t0 = time.perf_counter()
+    if not isinstance(maps, ParameterMaps):
+        maps = ParameterMaps.load(maps)
+    if tuple(maps.shape) != tuple(btf.shape):
+        raise UsageError(f"the maps have {maps.shape[0]} x {maps.shape[1]} texels, the BTF {btf.height} x {btf.width}")
+    idx = pair_indices(pairs)
+    photos = np.stack([btf.image(light, view) for light, view in idx]).astype(np.float64)
+    if photos.shape[-1] == 1:
+        photos = np.repeat(photos, 3, axis=-1)
+    t1 = time.perf_counter()
+    renders = render_maps(maps, idx)
+    t2 = time.perf_counter()
+    mask = np.ones(btf.shape, bool)
+    per = []
+    for k, (light, view) in enumerate(idx):
+        m = image_metrics(photos[k], renders[k], mask)
+        per.append({"pair": direction_name(light, view), "light": light, "view": view,
+                    **{key: v for key, v in m.items() if not key.startswith("_")}, "_mse": m["_mse_tonemapped"]})
+    d = renders.astype(np.float64) - photos
+    rms_ref = float(np.sqrt(np.mean(photos**2)))
+    mse_t = float(np.mean([p["_mse"] for p in per]))
+    overall = {"rmse": float(np.sqrt(np.mean(d * d))), "relative_rmse": float(np.sqrt(np.mean(d * d))) / rms_ref if rms_ref else float("nan"),
+               "psnr": float(10 * np.log10(1 / mse_t)) if mse_t > 0 else float("inf"),
+               "psnr_min": float(min(p["psnr"] for p in per)), "flip": float(np.mean([p["flip"] for p in per]))}
+    for p in per:
+        p.pop("_mse")
+    metrics = {"pairs": per, "overall": overall, "model": maps.model, "btf": btf.name,
+               "texels": [btf.height, btf.width]}
+    seconds = {"read photographs": t1 - t0, "render": t2 - t1}
+    files: list[Path] = []
+    if out is not None:
+        out = Path(out)
+        with atomic_dir(out, force) as tmp:
+            import OpenEXR
+
+            head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            for k, (light, view) in enumerate(idx):
+                name = direction_name(light, view)
+                for kind, img in (("photo", photos[k]), ("render", renders[k])):
+                    OpenEXR.File(head, {"RGB": np.ascontiguousarray(img, np.float32)}).write(str(tmp / f"{kind}_{name}.exr"))
+                    files.append(out / f"{kind}_{name}.exr")
+                fig = _panel_figure(photos[k : k + 1], renders[k : k + 1], [name], per[k : k + 1])
+                fig.savefig(tmp / f"panel_{name}.png")
+                files.append(out / f"panel_{name}.png")
+            seconds["total"] = time.perf_counter() - t0
+            (tmp / "metrics.json").write_text(json.dumps({**metrics, "seconds": seconds}, indent=2) + "\n")
+            files.append(out / "metrics.json")
+    seconds["total"] = time.perf_counter() - t0
+    return BTFValidation(pairs=idx, photos=photos, renders=renders, metrics=metrics, files=tuple(files), seconds=seconds)
