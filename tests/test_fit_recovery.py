@@ -59,13 +59,10 @@ RANGES: dict[str, dict[str, tuple]] = {
     "ashikhmin_shirley": {"rd": ALB, "rs": (0.05, 0.5), "nu": (5.0, 100.0, LOG), "nv": (5.0, 100.0, LOG)},
 }
 
-#: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run
-#: (observed with the solver of commit 644b209; the solver is being rewritten, issue 8).
+#: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run.
+#: (The bounded LM of issue 8 recovers phong_classic-1 and torrance_sparrow-1/-3, which the old
+#: active-set solver lost to local minima.)
 KNOWN_FAILURES: dict[tuple[str, int], str] = {
-    ("phong_classic", 1): "wrong local minimum: ks of two channels driven to 0 (log loss 0.017, 100x the "
-                          "noise), stops at max_steps",
-    ("torrance_sparrow", 1): "stops at max_steps with ks of one channel at 0 (the other lobes compensate)",
-    ("torrance_sparrow", 3): "stops at max_steps with ks of one channel at 0 (log loss 6e-4)",
     ("lafortune", 2): "reports converged with n = 100.0 (truth 36.6): n stays at the grid start's value",
 }
 

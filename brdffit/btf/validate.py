@@ -77,92 +77,13 @@ def pair_indices(pairs) -> list[tuple[int, int]]:
     return out
 
 
-def texel_brdf(maps: ParameterMaps):
-    """(uv (N, 2), wi (N, 3), wo (N, 3)) -> f_r (N, 3): the model at the nearest texel's parameters."""
-    import jax
-    import jax.numpy as jnp
-
-    from .. import models
-    from ..fitting.problem import resolve_model
-
-    base = models.get(maps.model)
-    # maps fitted to a one-channel BTF hold one value per colour parameter: render them grey
-    grey = all(np.shape(maps.params[p.name])[-1] == 1 for p in base.params if p.channels == 3)
-    mdl = resolve_model(base, 1 if grey else 3)
-    h, w = maps.shape
-    table = np.concatenate([np.asarray(maps.params[p.name], np.float64).reshape(h * w, -1) for p in mdl.params], axis=1)
-    table = jnp.asarray(table)
-
-    @jax.jit
-    def f(index, wi, wo):
-        v = table[index]
-        return jax.vmap(lambda vv, a, b: mdl.eval(mdl.unflatten(vv), a[None], b[None])[0])(v, wi, wo)
-
-    def brdf(uv, wi, wo):
-        n = uv.shape[0]
-        col = np.clip(np.floor(uv[:, 0] * w).astype(int), 0, w - 1)
-        row = np.clip(np.floor((1.0 - uv[:, 1]) * h).astype(int), 0, h - 1)
-        index = row * w + col
-        out = np.empty((n, mdl.channels))
-        for s in range(0, n, CHUNK):
-            e = min(n, s + CHUNK)
-            pad = CHUNK - (e - s)
-            idx = np.concatenate([index[s:e], np.zeros(pad, int)])
-            a = np.concatenate([wi[s:e], np.tile([[0.0, 0.0, 1.0]], (pad, 1))])
-            b = np.concatenate([wo[s:e], np.tile([[0.0, 0.0, 1.0]], (pad, 1))])
-            out[s:e] = np.asarray(f(jnp.asarray(idx), jnp.asarray(a), jnp.asarray(b)))[: e - s]
-        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
-
-    return brdf
-
-
-@functools.cache
-def _textured_class():
-    """A subclass of the callback BSDF whose f_r also depends on the texture coordinates."""
-    from ..render.bsdf import _callback_class, _vec_to_numpy
-    from .._mitsuba import mitsuba
-
-    mi = mitsuba()
-    import drjit as dr
-
-    scalar = mi.variant().startswith("scalar")
-    base = _callback_class()
-
-    class TexturedBSDF(base):
-        def __init__(self, props, brdf_uv=None, label: str = "texture"):
-            base.__init__(self, props, brdf=None, label=label)
-            self.brdf_uv = brdf_uv
-
-        def _eval_cos(self, si, wo, active):
-            # Mitsuba: si.wi = view, wo = light (SPEC 1 conversion as in the base class).
-            if scalar:
-                light = np.array([[wo.x, wo.y, wo.z]], np.float64)
-                view = np.array([[si.wi.x, si.wi.y, si.wi.z]], np.float64)
-                uv = np.array([[si.uv.x, si.uv.y]], np.float64)
-            else:
-                light, view = _vec_to_numpy(wo), _vec_to_numpy(si.wi)
-                uv = np.stack([np.asarray(si.uv.x, np.float64), np.asarray(si.uv.y, np.float64)], -1).reshape(-1, 2)
-            up = (light[:, 2] > 0) & (view[:, 2] > 0)
-            value = np.zeros((light.shape[0], 3))
-            if up.any():
-                value[up] = np.asarray(self.brdf_uv(uv[up], light[up], view[up]), np.float64) * light[up, 2:3]
-            if scalar:
-                return mi.Color3f(*map(float, value[0])) if active else mi.Color3f(0.0)
-            v32 = value.astype(np.float32)
-            col = mi.Color3f(mi.Float(v32[:, 0]), mi.Float(v32[:, 1]), mi.Float(v32[:, 2]))
-            return dr.select(active, col, mi.Color3f(0.0))
-
-    return TexturedBSDF
-
-
 def textured_bsdf(maps: ParameterMaps):
-    """A Mitsuba BSDF rendering ``maps`` (per-texel parameters of the model's JAX formula)."""
-    from .._mitsuba import mitsuba
-    from ..render.bsdf import import_native
+    """A Mitsuba BSDF rendering ``maps``: brdffit's map BSDF (``brdffit.mitsuba_bsdf`` with
+    parameter maps: the model's JAX formula at the nearest texel's parameters). Texel rows run
+    top to bottom in the BTF's images, upwards in the square's v coordinate, hence the flip."""
+    from ..render.export import mitsuba_bsdf
 
-    import_native()
-    mi = mitsuba()
-    return _textured_class()(mi.Properties(), brdf_uv=texel_brdf(maps), label=f"{maps.model} maps")
+    return mitsuba_bsdf(maps.model, {name: np.asarray(v, np.float64)[::-1] for name, v in maps.params.items()})
 
 
 def _camera_to_world(mi, view: np.ndarray):
