@@ -4,8 +4,10 @@ Written files (in ``out``, atomically: the folder appears complete or not at all
 
 - ``reference_tTT_pPPP.exr``, ``fit_tTT_pPPP.exr``: linear radiance per light (theta, phi of the
   light in integer degrees), 32-bit float RGB OpenEXR.
-- ``panel_tTT_pPPP.png``: reference | fit | error heat map with a colour bar, per light.
-- ``table.png``: the 81x81 UBO tables, measured | fitted | error; ``table_reference.exr`` and
+- ``panel_tTT_pPPP.png``: reference | fit | signed error per channel (R, G, B) with a colour bar,
+  per light (:func:`brdffit.plot.sphere_panel`).
+- ``table.png``: the 81x81 UBO tables, measured | fitted | log residual per channel
+  (:func:`brdffit.plot.compare_table`); ``table_reference.exr`` and
   ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr; entries a measured
   table marks invalid are NaN in the reference table and left out of the table metrics).
 - ``metrics.json``: rmse, relative_rmse, psnr, flip per light and overall (see
@@ -196,9 +198,7 @@ def validate(
             _write_exr(tmp / "table_fit.exr", tab_fit)
             files += [Path(out) / "table_reference.exr", Path(out) / "table_fit.exr"]
             lap("write exr")
-            from .panels import SpherePanels, table_panel
-
-            panels = SpherePanels(int(size), ref_src.label, fit_src.label, irradiance)
+            from .. import plot
         per_light = []
         for k, d in enumerate(dirs):
             m = futures[k].result()
@@ -208,7 +208,9 @@ def validate(
             tell("metrics", k + 1, len(dirs))
             if tmp is not None:
                 tag = _tag(d)
-                panels.write(tmp / f"panel_{tag}.png", ref_imgs[k], fit_imgs[k], scales[k], d, per_light[k])
+                fig = plot.sphere_panel(ref_imgs[k], fit_imgs[k], d, metrics=per_light[k], scale=scales[k],
+                                        ref_label=ref_src.label, fit_label=fit_src.label, irradiance=irradiance)
+                fig.savefig(tmp / f"panel_{tag}.png", dpi=90, pil_kwargs={"compress_level": 1})
                 files.append(Path(out) / f"panel_{tag}.png")
                 tell("panels", k + 1, len(dirs) + 1)
         overall = summarise(per_light, ref_imgs, fit_imgs, mask)
@@ -224,8 +226,10 @@ def validate(
             "table": table,
         }
         if tmp is not None:
-            panels.close()
-            table_panel(tmp / "table.png", tab_ref, tab_fit, ref_src.label, fit_src.label, table)
+            fig = plot.compare_table(tab_ref, tab_fit, title=(
+                f"UBO-81 table, {fit_src.label} against {ref_src.label}: RMSE {table['rmse']:.3g} 1/sr   "
+                f"rel. RMSE {table['relative_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
+            fig.savefig(tmp / "table.png", dpi=90, pil_kwargs={"compress_level": 1})
             files.append(Path(out) / "table.png")
             tell("panels", len(dirs) + 1, len(dirs) + 1)
             lap("metrics and panels")
