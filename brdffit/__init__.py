@@ -36,9 +36,12 @@ _LAZY = {
     "validate": "brdffit.render",
     "Validation": "brdffit.render",
 }
+# brdffit.plot is a module: `import brdffit.plot` or `brdffit.plot` after first use (lazy, below)
 
 
 def __getattr__(name: str):
+    if name == "plot":
+        return importlib.import_module("brdffit.plot")
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
@@ -47,7 +50,8 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(list(globals()) + list(_LAZY))
+    # the public names only (not the helpers this module imports: annotations, importlib, jax)
+    return sorted({*__all__, "__version__", "plot"})
 
 
 __all__ = [

@@ -319,6 +319,8 @@ def slices(measurement=None, fit=None, *, theta_light: float = np.radians(45.0),
     phi_light + 90 degrees. Measured samples within ``tolerance_deg`` of a plane are dots; the fit is
     the curve. Either of ``measurement`` and ``fit`` may be None.
     """
+    from matplotlib.ticker import MaxNLocator
+
     from .errors import UsageError
 
     if measurement is None and fit is None:
@@ -378,6 +380,7 @@ def slices(measurement=None, fit=None, *, theta_light: float = np.radians(45.0),
                 ax.plot([-np.radians(theta_l_deg)] * 2, [0, top * 1.05 or 1], color="goldenrod", lw=1, ls=":",
                         label="light")
             ax.set_ylim(0, top * 1.05 if top > 0 else 1)
+            ax.yaxis.set_major_locator(MaxNLocator(4))
             ax.tick_params(labelsize=7)
             ax.set_title(f"{name}, {plane}", fontsize=9)
             if row == 0 and c == len(names) - 1:

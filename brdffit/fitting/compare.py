@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
@@ -133,23 +134,51 @@ def compare(
     solvers: Sequence[str] = ("lm", "lmb", "dogleg", "bfgs", "scipy"),
     losses: Sequence[str] = ("log",),
     *,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | bool | None = None,
     **fit_options,
 ) -> Report:
-    """Fit every (model, solver, loss) combination; evaluate every loss on each result."""
+    """Fit every (model, solver, loss) combination; evaluate every loss on each result.
+
+    ``progress``: a callable told the label of each fit before it starts, or True for a rich
+    progress bar (fits done, the one running, time elapsed) in a terminal or a notebook."""
     from .. import models as _models
 
     models = list(models) if models else _models.names()
     solvers = [check_solver(s) for s in solvers]
     losses = [check_loss(x) for x in losses]
     prep = prepare(measurement)
+    combos = [(m, x, s) for m in models for x in losses for s in solvers]
     rows, results = [], []
-    for model in models:
-        for loss in losses:
-            for solver in solvers:
-                if progress:
-                    progress(f"{model} / {solver} / {loss}")
-                r = fit(measurement, model, loss=loss, solver=solver, **fit_options)
-                rows.append(_row(r, evaluate(r.model, r.params, prep.data)))
-                results.append(r)
+    with _progress_bar(len(combos), progress is True) as advance:
+        for model, loss, solver in combos:
+            label = f"{model} / {solver} / {loss}"
+            if callable(progress):
+                progress(label)
+            advance(label)
+            r = fit(measurement, model, loss=loss, solver=solver, **fit_options)
+            rows.append(_row(r, evaluate(r.model, r.params, prep.data)))
+            results.append(r)
+        advance(None)
     return Report(tuple(rows), measurement.name, tuple(results))
+
+
+@contextlib.contextmanager
+def _progress_bar(total: int, show: bool):
+    """advance(label) before each fit, advance(None) at the end; a no-op unless ``show``."""
+    if not show:
+        yield lambda label: None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  transient=False) as bar:
+        task = bar.add_task("compare", total=total)
+        started = {"n": 0}
+
+        def advance(label):
+            if started["n"]:
+                bar.advance(task)
+            started["n"] += 1
+            bar.update(task, description=f"fitting {label}" if label else "done")
+
+        yield advance

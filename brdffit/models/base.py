@@ -114,6 +114,11 @@ class Model:
     #: Component models of a composite ("lambert+ggx"), empty for a base model.
     components: tuple[Any, ...] = ()
 
+    def __repr__(self) -> str:
+        # short: the docstring and formula are in help(model) / model.doc, not in every repr
+        ps = ", ".join(p.name if self.size(p) == 1 else f"{p.name}({self.size(p)})" for p in self.params)
+        return f"Model({self.name!r}: {ps}; {self.citation.splitlines()[0] if self.citation else ''})"
+
     # -- parameter table ------------------------------------------------------------------------
     def param(self, name: str) -> Param:
         for p in self.params:

@@ -66,6 +66,26 @@ class Validation:
             f"psnr {o['psnr']:.1f} dB, flip {o['flip']:.3f}; {len(self.files)} files)"
         )
 
+    def _repr_png_(self) -> bytes:
+        """Reference and fit spheres under every light (:func:`brdffit.plot.spheres`)."""
+        from ..plot import png_bytes, spheres
+
+        return png_bytes(spheres(self))
+
+    def _repr_html_(self) -> str:
+        import base64
+        import html
+
+        o, t = self.metrics["overall"], self.metrics.get("table", {})
+        img = base64.b64encode(self._repr_png_()).decode()
+        table = (f"; 81x81 table: RMSE {t['rmse']:.4g} 1/sr, log-RMSE {t['log_rmse']:.4g}" if t else "")
+        return (
+            f"<p><b>Validation</b> of {html.escape(str(self.metrics.get('fit', 'fit')))} against "
+            f"{html.escape(str(self.metrics.get('reference', 'reference')))}: {len(self.lights)} lights, "
+            f"{self.reference.shape[1]} px; RMSE {o['rmse']:.4g}, PSNR {o['psnr']:.1f} dB, FLIP {o['flip']:.3f}"
+            f"{html.escape(table)}</p><img src='data:image/png;base64,{img}'/>"
+        )
+
 
 def as_fit(fit) -> Source:
     """The fit to validate: a FitResult, a path to a fit.json, a (model_name, params) pair."""
