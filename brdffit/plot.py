@@ -228,7 +228,8 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
     v3 = np.broadcast_to(valid[..., None], ref.shape)
     d = (fitted - ref)[v3]
     rmse = float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
-    lrmse = float(log_rmse(fitted, ref, cos_l[..., None], valid[..., None].astype(np.float64)))
+    v = valid[..., None]
+    lrmse = float(log_rmse(np.where(v, fitted, 0.0), np.where(v, ref, 0.0), cos_l[..., None], v.astype(np.float64)))
 
     names = _channel_names(ref.shape[-1])
     fig = _figure((4.0 * max(len(names), 2) + 1.0, 8.6), layout="constrained")

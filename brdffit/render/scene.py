@@ -153,9 +153,9 @@ def render_sphere(
     v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,
     pointing right at the image centre; see the module docstring).
     """
+    dirs = light_directions(lights)  # bad lights (degrees, below the horizon) fail before any work
     mi = mitsuba()
     src: Source = as_source(source)
-    dirs = light_directions(lights)
     size = int(size)
     if size < 1 or spp < 1:
         raise ValueError("size and spp must be >= 1")
