@@ -45,9 +45,12 @@ _LAZY = {
     "validate_btf": "brdffit.btf",
     "BTFValidation": "brdffit.btf",
 }
+# brdffit.plot is a module: `import brdffit.plot` or `brdffit.plot` after first use (lazy, below)
 
 
 def __getattr__(name: str):
+    if name == "plot":
+        return importlib.import_module("brdffit.plot")
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
@@ -70,7 +73,8 @@ _register_mitsuba_plugin()
 
 
 def __dir__():
-    return sorted(list(globals()) + list(_LAZY))
+    # the public names only (not the helpers this module imports: annotations, importlib, jax)
+    return sorted({*__all__, "__version__", "plot"})
 
 
 __all__ = [

@@ -29,45 +29,6 @@ def sample_measurement() -> tuple[Measurement, str]:
     return sample.generate(), "brdffit.sample.generate()"
 
 
-def plot_table(m: Measurement, path: Path, title: str | None = None) -> Path:
-    """PNG of the 81 x 81 table (rows light, columns view), log-scaled luminance-preserving RGB."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .grid import UBO_PHI_STEP_DEG, UBO_THETA_DEG
-
-    table = m.table()
-    if table.shape[2] == 1:
-        table = np.repeat(table, 3, axis=2)
-    valid = m.valid_mask().reshape(81, 81)
-    # log tone map: the table spans decades between diffuse and highlight
-    positive = table[valid & np.all(table > 0, axis=2)]
-    lo = np.percentile(positive, 1) if positive.size else 1e-3
-    hi = np.percentile(positive, 99.9) if positive.size else 1.0
-    img = np.clip((np.log(np.maximum(table, lo)) - np.log(lo)) / max(np.log(hi) - np.log(lo), 1e-9), 0, 1)
-    img[~valid] = (1.0, 0.0, 1.0)  # invalid samples in magenta
-    fig, ax = plt.subplots(figsize=(6.4, 6.0), dpi=110)
-    ax.imshow(img, interpolation="nearest")
-    # ring boundaries (theta) on both axes
-    counts = [360 // s for s in UBO_PHI_STEP_DEG]
-    edges = np.cumsum([0, *counts])[1:-1] - 0.5
-    for e in edges:
-        ax.axhline(e, color="white", lw=0.4, alpha=0.6)
-        ax.axvline(e, color="white", lw=0.4, alpha=0.6)
-    centres = np.cumsum([0, *counts])[:-1] + np.array(counts) / 2 - 0.5
-    ax.set_xticks(centres, [f"{t}" for t in UBO_THETA_DEG])
-    ax.set_yticks(centres, [f"{t}" for t in UBO_THETA_DEG])
-    ax.set_xlabel("view (theta ring, deg; phi within ring)")
-    ax.set_ylabel("light (theta ring, deg; phi within ring)")
-    ax.set_title(title or f"{m.name}: f_r, log scale {lo:.3g}..{hi:.3g} 1/sr (magenta: invalid)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
-
-
 DEMO_MODELS = ("lambert", "blinn_phong", "ggx", "lambert+ggx+ggx")
 DEMO_SOLVERS = ("lm", "scipy")
 
@@ -87,7 +48,7 @@ def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128
 
     from ._files import atomic_dir
     from .cli.compare import print_report
-    from .cli.fit import plot_fit
+    from . import plot
     from .cli.info import print_info
     from .fitting import compare, fit
     from .io import save
@@ -107,7 +68,7 @@ def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128
         written["npz"] = out / "sample_ubo81.npz"
 
         console.rule("[bold]3. plot the 81 x 81 table")
-        plot_table(m, tmp / "table.png")
+        plot.table(m).savefig(tmp / "table.png", dpi=110)
         console.print(f"wrote {out / 'table.png'}")
         written["table_png"] = out / "table.png"
 
@@ -118,7 +79,7 @@ def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128
         _print_recovery(result, console)
         (tmp / "fit").mkdir()
         result.to_json(tmp / "fit" / "fit.json")
-        plot_fit(m, result, tmp / "fit" / "fit.png")
+        plot.fit_figure(m, result).savefig(tmp / "fit" / "fit.png", dpi=110)
         written["fit_json"] = out / "fit" / "fit.json"
         written["fit_png"] = out / "fit" / "fit.png"
 
@@ -129,7 +90,7 @@ def run_demo(out: str | Path, force: bool = False, console=None, size: int = 128
         (tmp / "compare").mkdir()
         report.to_csv(tmp / "compare" / "report.csv")
         report.to_json(tmp / "compare" / "report.json")
-        report.plot_pareto(tmp / "compare" / "pareto.png")
+        report.plot().savefig(tmp / "compare" / "pareto.png", dpi=120)
         written["pareto_png"] = out / "compare" / "pareto.png"
 
         console.rule("[bold]6. validate in Mitsuba 3: fit vs measured table, sweep of 5 lights")
@@ -161,4 +122,6 @@ def _print_recovery(result, console) -> None:
     for name, truth, value in rows:
         table.add_row(name, np.array2string(np.atleast_1d(truth), precision=3),
                       np.array2string(np.atleast_1d(value), precision=3))
-    console.print(table)
+    from .cli.compare import print_wide
+
+    print_wide(console, table)

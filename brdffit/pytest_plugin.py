@@ -1,7 +1,8 @@
 """Opt-in pytest fixtures for users' suites: ``pytest_plugins = ["brdffit.pytest_plugin"]``.
 
-- ``brdffit_data``: the folder of real measurements ($BRDFFIT_DATA, else ../shared/data from the
-  rootdir); the test is skipped, with the reason, when there is none.
+- ``brdffit_data``: the folder of real measurements (the one holding ``measured/``): $BRDFFIT_DATA,
+  else ../shared/data beside pytest's rootdir; the test is skipped when there is none, with a
+  reason that names every place looked in (``pytest -rs`` prints it).
 - ``ubo_pairs``: the UBO-81 (wi, wo) pairs, (6561, 3) each, sample k = light * 81 + view.
 """
 
@@ -13,13 +14,22 @@ from pathlib import Path
 import pytest
 
 
+def data_candidates(rootpath: Path) -> list[tuple[str, Path | None]]:
+    """Where ``brdffit_data`` looks, in order: $BRDFFIT_DATA, then ../shared/data beside the
+    project (pytest's rootdir)."""
+    env = os.environ.get("BRDFFIT_DATA")
+    return [("$BRDFFIT_DATA", Path(env) if env else None), ("rootdir/../shared/data", Path(rootpath).parent / "shared" / "data")]
+
+
 @pytest.fixture(scope="session")
 def brdffit_data(request) -> Path:
-    candidates = [os.environ.get("BRDFFIT_DATA"), str(Path(request.config.rootpath).parent / "shared" / "data")]
-    for c in candidates:
-        if c and (Path(c) / "measured").is_dir():
-            return Path(c)
-    pytest.skip("no real measurements: set BRDFFIT_DATA to a folder holding measured/")
+    candidates = data_candidates(request.config.rootpath)
+    for _, c in candidates:
+        if c is not None and (c / "measured").is_dir():
+            return c
+    looked = "; ".join(f"{name} = {'unset' if c is None else c}" for name, c in candidates)
+    pytest.skip(f"no real measurements (a folder holding measured/): looked in {looked}; "
+                "set BRDFFIT_DATA to the data folder")
 
 
 @pytest.fixture(scope="session")

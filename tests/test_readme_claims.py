@@ -129,13 +129,20 @@ def test_internal_error_exits_3_with_one_line_and_debug_shows_the_traceback(tmp_
 
 # --- atomic folders: fit, compare, demo -------------------------------------------------------------
 
+class _FailingFigure:
+    """Stands in for a brdffit.plot figure whose PNG write fails half-way."""
+
+    def savefig(self, path, *a, **k):
+        _half_write_then_fail(path)
+
+
 def test_fit_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys):
     src = tmp_path / "src.npz"
     brdffit.save(_ubo_measurement(), src)
     out = tmp_path / "fitout"
-    import brdffit.cli.fit as fit_cmd
+    import brdffit.plot
 
-    monkeypatch.setattr(fit_cmd, "plot_fit", lambda m, r, path, *a, **k: _half_write_then_fail(path))
+    monkeypatch.setattr(brdffit.plot, "fit_figure", lambda *a, **k: _FailingFigure())
     code, _, err = _run(capsys, "fit", src, "-m", "lambert", "-o", out)
     assert code == 3, err
     assert not out.exists() and _leftovers(tmp_path, out) == []
@@ -154,7 +161,7 @@ def test_compare_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys
     out = tmp_path / "cmp"
     from brdffit.fitting.compare import Report
 
-    monkeypatch.setattr(Report, "plot_pareto", lambda self, path, *a, **k: _half_write_then_fail(path))
+    monkeypatch.setattr(Report, "plot", lambda self, *a, **k: _FailingFigure())
     code, _, err = _run(capsys, "compare", src, "--models", "lambert", "--solvers", "lm", "-o", out)
     assert code == 3, err
     assert not out.exists() and _leftovers(tmp_path, out) == []
@@ -162,8 +169,9 @@ def test_compare_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys
 
 def test_demo_failing_half_way_leaves_no_folder(tmp_path, monkeypatch):
     import brdffit.demo as demo
+    import brdffit.plot
 
-    monkeypatch.setattr(demo, "plot_table", lambda m, path, *a, **k: _half_write_then_fail(path))
+    monkeypatch.setattr(brdffit.plot, "table", lambda *a, **k: _FailingFigure())
     out = tmp_path / "demo"
     with pytest.raises(Boom):
         demo.run_demo(out)

@@ -163,12 +163,12 @@ def test_invalid_table_entries_are_left_out(tmp_path):
 
 
 def test_failure_leaves_nothing_behind(tmp_path, monkeypatch):
-    import brdffit.render.panels as panels
+    import brdffit.plot as plot
 
     def broken(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(panels, "table_panel", broken)
+    monkeypatch.setattr(plot, "compare_table", broken)
     with pytest.raises(RuntimeError, match="disk full"):
         validate(ggx_measurement(), ("ggx", GGX), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
     assert list(tmp_path.iterdir()) == []

@@ -30,7 +30,24 @@ def print_report(report, loss: str, console) -> None:
         table.add_row(r["model"], r["solver"], r["loss"], str(r["n_params"]), f"{r[f'loss_{loss}']:.4g}",
                       f"{r['run_s']:.3f}", f"{r['compile_s']:.2f}", str(r["steps"]),
                       "ok" if r["converged"] else "[red]not converged[/]")
-    console.print(table)
+    print_wide(console, table)
+
+
+def print_wide(console, renderable) -> None:
+    """Print a table uncut: where the output is not a terminal (a pipe, a log file: 80 columns by
+    default) the console is widened to the table's natural width for this print."""
+    from rich.measure import Measurement
+
+    need = Measurement.get(console, console.options.update_width(10_000), renderable).maximum
+    if console.is_terminal or need <= console.width:
+        console.print(renderable)
+        return
+    saved = console.width
+    console.width = need
+    try:
+        console.print(renderable)
+    finally:
+        console.width = saved
 
 
 @cli.command("compare")
@@ -87,7 +104,7 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
         with atomic_dir(out, force) as tmp:
             report.to_csv(tmp / "report.csv")
             report.to_json(tmp / "report.json")
-            report.plot_pareto(tmp / "pareto.png", metric=f"loss_{losses[0]}")
-    print_report(report, losses[0], Console(width=max(Console().width, 110)))
+            report.plot(metric=f"loss_{losses[0]}").savefig(tmp / "pareto.png", dpi=120)
+    print_report(report, losses[0], Console())
     console.print(f"wrote {out}/report.csv, {out}/report.json, {out}/pareto.png")
     return EXIT_OK if all(r["converged"] for r in report.rows) else EXIT_NOT_CONVERGED

@@ -1,7 +1,7 @@
 """``brdffit fit SOURCE --model M [--loss L] [--solver S] -o DIR``: one fit (SPEC 7).
 
 Writes DIR/fit.json (``FitResult.to_json``) and DIR/fit.png: for a UBO-81 measurement the 81x81
-table measured | fitted | log-ratio (light rows, view columns, log colour scale); for scattered
+table measured | fitted | log residual per channel (``brdffit.plot.fit_figure``); for scattered
 samples, fitted against measured values per channel. Exit 1 when the fit did not converge (the
 results are still written; fit.json says ``"converged": false``).
 """
@@ -11,7 +11,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
@@ -46,54 +45,12 @@ def parse_assignments(option: str, items, expect_pair: bool) -> dict:
     return out
 
 
-def plot_fit(measurement, result, path: Path) -> None:
-    import matplotlib
+def model_help() -> str:
+    """--model's help: the model names (``brdffit models`` shows their parameters)."""
+    from ..models import names
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
-
-    mask = measurement.valid_mask()
-    fitted = result.eval(np.asarray(measurement.wi), np.asarray(measurement.wo))
-    ref = np.asarray(measurement.values)
-    title = f"{result.model_name} ({result.solver}, {result.loss} loss) on {measurement.name}: {result.status}"
-    if measurement.grid == "ubo81":
-        lum_ref = ref.mean(axis=1).reshape(81, 81)
-        lum_fit = fitted.mean(axis=1).reshape(81, 81)
-        valid = mask.reshape(81, 81)
-        pos = lum_ref[valid & (lum_ref > 0)]
-        vmin = max(float(np.percentile(pos, 1)) if pos.size else 1e-3, 1e-6)
-        vmax = max(float(lum_ref[valid].max()), float(lum_fit.max()), vmin * 10)
-        fig, axes = plt.subplots(1, 3, figsize=(15, 5), dpi=110)
-        for ax, img, name in ((axes[0], lum_ref, "measured"), (axes[1], lum_fit, "fitted")):
-            im = ax.imshow(np.where(valid, np.maximum(img, vmin), np.nan), norm=LogNorm(vmin, vmax), cmap="magma")
-            ax.set_title(f"{name} (mean of channels, 1/sr)")
-            ax.set_xlabel("view index")
-            ax.set_ylabel("light index")
-            fig.colorbar(im, ax=ax, fraction=0.046)
-        ratio = np.log10(np.maximum(lum_fit, 1e-9) / np.maximum(lum_ref, 1e-9))
-        im = axes[2].imshow(np.where(valid, ratio, np.nan), cmap="coolwarm", vmin=-1, vmax=1)
-        axes[2].set_title("log10(fitted / measured)")
-        axes[2].set_xlabel("view index")
-        fig.colorbar(im, ax=axes[2], fraction=0.046)
-    else:
-        fig, ax = plt.subplots(figsize=(6.5, 6), dpi=110)
-        colours = ("tab:red", "tab:green", "tab:blue") if ref.shape[1] == 3 else ("k",)
-        lo = max(float(np.min(ref[mask][ref[mask] > 0], initial=1e-3)), 1e-6)
-        hi = float(max(ref[mask].max(), fitted[mask].max()))
-        for c in range(ref.shape[1]):
-            ax.scatter(np.maximum(ref[mask, c], lo), np.maximum(fitted[mask, c], lo), s=4, alpha=0.5,
-                       color=colours[c % len(colours)], label=f"channel {c}")
-        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8, label="fitted = measured")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("measured f_r [1/sr]")
-        ax.set_ylabel("fitted f_r [1/sr]")
-        ax.legend(fontsize=8)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return (f"Model: {', '.join(names())}, or a sum such as lambert+ggx+ggx "
+            "(`brdffit models` lists parameters, bounds and citations).")
 
 
 # The CLI's defaults are the API's (one set of defaults, a module without heavy imports).
@@ -106,7 +63,7 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 
 @cli.command("fit")
 @click.argument("source", type=click.Path(path_type=str))
-@click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx+ggx.")
+@click.option("--model", "-m", "model", required=True, help=model_help())
 @click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
 @click.option("--solver", default=_SOLVER, show_default=True, help=" | ".join(_SOLVERS))
 @click.option("--multistart", default=None, type=click.IntRange(min=0),
@@ -127,7 +84,7 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
 
     from rich.console import Console
 
-    from .. import load
+    from .. import load, plot
     import contextlib
 
     from .._files import atomic_dir, reserve
@@ -168,7 +125,7 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         progress("writing fit.json, fit.png")
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
-            plot_fit(m, r, tmp / "fit.png")
+            plot.fit_figure(m, r).savefig(tmp / "fit.png", dpi=110)
     console.print(repr(r), soft_wrap=True)
     for line in r.warnings:  # one line each, on stderr with the rest of the report
         console.print(f"warning: {line}", soft_wrap=True, markup=False, highlight=False)

@@ -11,6 +11,13 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def _meta_text(key: str, value) -> str:
+    """A metadata value for display: angles to 0.1 degree, other floats to 4 significant digits."""
+    if isinstance(value, float):
+        return f"{value:.1f} deg" if key.endswith("_deg") else f"{value:.4g}"
+    return str(value)
+
+
 @cli.command("info")
 @click.argument("source", type=click.Path(path_type=str))
 def info(source: str) -> int:
@@ -45,11 +52,13 @@ def print_info(m, fmt: str, source: str, console=None) -> None:
         "invalid samples",
         f"{s['invalid']} (weight 0: {s['zero_weight']}, non-finite: {s['non_finite']})",
     )
+    negative = sum(r["negative"] for r in s["ranges"])
+    head.add_row("negative values", f"{negative} (channel values < 0 in valid samples; kept)")
     head.add_row("theta light", f"{s['theta_light_deg'][0]:.1f} .. {s['theta_light_deg'][1]:.1f} deg")
     head.add_row("theta view", f"{s['theta_view_deg'][0]:.1f} .. {s['theta_view_deg'][1]:.1f} deg")
     for key in ("interpolation", "extrapolated", "max_extrapolation_deg", "light_directions"):
         if key in m.meta:
-            head.add_row(key.replace("_", " "), str(m.meta[key]))
+            head.add_row(key.replace("_", " "), _meta_text(key, m.meta[key]))
     console.print(head)
     ranges = Table(title="values over valid samples (1/sr)", title_justify="left")
     for col in ("channel", "min", "max", "mean", "negative"):

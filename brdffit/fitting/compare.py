@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
@@ -54,58 +55,60 @@ class Report:
     def best(self, metric: str = "loss_log") -> dict[str, Any]:
         return min(self.rows, key=lambda r: r[metric])
 
-    def plot_pareto(self, path: str | os.PathLike, metric: str = "loss_log") -> Path:
-        """Error (``metric``) against run time, log axes, one labelled point per row; the Pareto
-        front (no other row both faster and more accurate) is joined by a line."""
-        import matplotlib
+    def pareto(self, metric: str = "loss_log", rtol: float = 1e-6) -> list[dict[str, Any]]:
+        """The rows on the error-against-run-time front, fastest first (SPEC 5): a row is on it
+        when no other row is both at least as fast and lower in ``metric`` by more than ``rtol``
+        relative. Rows whose errors tie within ``rtol`` keep only the fastest (the first of equally
+        fast ones)."""
+        import math
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        rows = [(k, r) for k, r in enumerate(self.rows) if math.isfinite(r[metric]) and math.isfinite(r["run_s"])]
 
-        rows = [r for r in self.rows if r[metric] > 0 and r["run_s"] > 0]
-        fig, ax = plt.subplots(figsize=(9, 6.5), dpi=120)
-        solvers = sorted({r["solver"] for r in rows})
-        markers = dict(zip(solvers, "osD^v<>p*"))
-        models = sorted({r["model"] for r in rows})
-        cmap = plt.get_cmap("tab20" if len(models) > 10 else "tab10")
-        colours = {m: cmap(i % cmap.N) for i, m in enumerate(models)}
-        for r in rows:
-            ax.scatter(r["run_s"], r[metric], marker=markers[r["solver"]], color=colours[r["model"]], s=46,
-                       edgecolors="black" if r["converged"] else "red", linewidths=0.6 if r["converged"] else 1.6,
-                       zorder=3)
-        front = []
-        for r in sorted(rows, key=lambda r: (r["run_s"], r[metric])):
-            if not front or r[metric] < front[-1][metric]:
-                front.append(r)
-        # Colour = model, marker = solver (legend); text labels only on the Pareto front, where
-        # the choice is made (labelling every point makes an unreadable pile).
-        several_losses = len({x["loss"] for x in rows}) > 1
-        for i, r in enumerate(front):
-            label = f"{r['model']} / {r['solver']}" + (f" / {r['loss']}" if several_losses else "")
-            ax.annotate(label, (r["run_s"], r[metric]), fontsize=7.5, xytext=(6, 6 if i % 2 else -10),
-                        textcoords="offset points", bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
-        if len(front) > 1:
-            ax.plot([r["run_s"] for r in front], [r[metric] for r in front], "k--", lw=0.8, zorder=2,
-                    label="Pareto front")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("run time [s] (after compilation)")
-        ax.set_ylabel(f"{metric.replace('loss_', '')} loss on the measurement")
-        ax.set_title(f"error against run time: {self.data_name}")
-        ax.grid(True, which="both", alpha=0.3)
-        from matplotlib.lines import Line2D
+        def beats(q: tuple[int, dict], r: tuple[int, dict]) -> bool:
+            (kq, q), (kr, r) = q, r
+            if q["run_s"] > r["run_s"]:
+                return False
+            tol = rtol * max(abs(q[metric]), abs(r[metric]))
+            if q[metric] < r[metric] - tol:
+                return True
+            tie = abs(q[metric] - r[metric]) <= tol
+            return tie and (q["run_s"] < r["run_s"] or kq < kr)
 
-        handles = [Line2D([], [], marker=markers[s], ls="", color="grey", label=f"solver {s}") for s in solvers]
-        handles += [Line2D([], [], marker="s", ls="", color=colours[m], label=m) for m in models]
-        handles.append(Line2D([], [], marker="o", ls="", mfc="white", mec="red", mew=1.6, label="not converged"))
-        if len(front) > 1:
-            handles.append(Line2D([], [], ls="--", color="k", label="Pareto front"))
-        ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-        fig.tight_layout()
-        path = Path(path)
-        fig.savefig(path)
-        plt.close(fig)
-        return path
+        front = [r for r in rows if not any(beats(q, r) for q in rows if q[0] != r[0])]
+        return [r for _, r in sorted(front, key=lambda kr: (kr[1]["run_s"], kr[0]))]
+
+    def plot(self, metric: str = "loss_log"):
+        """:func:`brdffit.plot.pareto` of this report (a matplotlib Figure)."""
+        from ..plot import pareto
+
+        return pareto(self, metric)
+
+    def __repr__(self) -> str:
+        best = min(self.rows, key=lambda r: r["loss_log"], default=None)
+        tail = f"; best log loss {best['loss_log']:.4g} ({best['model']} / {best['solver']})" if best else ""
+        return f"Report({self.data_name!r}: {len(self.rows)} rows{tail})"
+
+    def _repr_png_(self) -> bytes:
+        from ..plot import png_bytes
+
+        return png_bytes(self.plot())
+
+    def _repr_html_(self) -> str:
+        import base64
+        import html
+
+        cols = ("model", "solver", "loss", "n_params", "loss_log", "log_rmse", "run_s", "compile_s", "steps", "converged")
+        ranked = sorted(self.rows, key=lambda r: r["loss_log"])
+        head = "".join(f"<th>{c}</th>" for c in cols)
+
+        def cell(v):
+            return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
+
+        body = "".join("<tr>" + "".join(f"<td>{cell(r.get(c))}</td>" for c in cols) + "</tr>" for r in ranked[:12])
+        more = f"<p>... {len(ranked) - 12} more rows (report.rows, report.to_csv())</p>" if len(ranked) > 12 else ""
+        img = base64.b64encode(self._repr_png_()).decode()
+        return (f"<p><b>{html.escape(self.data_name)}</b>: {len(self.rows)} fits, ranked by log loss</p>"
+                f"<table><tr>{head}</tr>{body}</table>{more}<img src='data:image/png;base64,{img}'/>")
 
 
 def _row(r: FitResult, all_losses: dict[str, float]) -> dict[str, Any]:
@@ -133,23 +136,51 @@ def compare(
     solvers: Sequence[str] = DEFAULT_SOLVERS,
     losses: Sequence[str] = ("log",),
     *,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | bool | None = None,
     **fit_options,
 ) -> Report:
-    """Fit every (model, solver, loss) combination; evaluate every loss on each result."""
+    """Fit every (model, solver, loss) combination; evaluate every loss on each result.
+
+    ``progress``: a callable told the label of each fit before it starts, or True for a rich
+    progress bar (fits done, the one running, time elapsed) in a terminal or a notebook."""
     from .. import models as _models
 
     models = list(models) if models else _models.names()
     solvers = [check_solver(s) for s in solvers]
     losses = [check_loss(x) for x in losses]
     prep = prepare(measurement)
+    combos = [(m, x, s) for m in models for x in losses for s in solvers]
     rows, results = [], []
-    for model in models:
-        for loss in losses:
-            for solver in solvers:
-                if progress:
-                    progress(f"{model} / {solver} / {loss}")
-                r = fit(measurement, model, loss=loss, solver=solver, **fit_options)
-                rows.append(_row(r, evaluate(r.model, r.params, prep.data)))
-                results.append(r)
+    with _progress_bar(len(combos), progress is True) as advance:
+        for model, loss, solver in combos:
+            label = f"{model} / {solver} / {loss}"
+            if callable(progress):
+                progress(label)
+            advance(label)
+            r = fit(measurement, model, loss=loss, solver=solver, **fit_options)
+            rows.append(_row(r, evaluate(r.model, r.params, prep.data)))
+            results.append(r)
+        advance(None)
     return Report(tuple(rows), measurement.name, tuple(results))
+
+
+@contextlib.contextmanager
+def _progress_bar(total: int, show: bool):
+    """advance(label) before each fit, advance(None) at the end; a no-op unless ``show``."""
+    if not show:
+        yield lambda label: None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  transient=False) as bar:
+        task = bar.add_task("compare", total=total)
+        started = {"n": 0}
+
+        def advance(label):
+            if started["n"]:
+                bar.advance(task)
+            started["n"] += 1
+            bar.update(task, description=f"fitting {label}" if label else "done")
+
+        yield advance

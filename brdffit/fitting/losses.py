@@ -69,6 +69,20 @@ def transform(loss: str, f, cos_i, floor):
     raise ValueError(loss)
 
 
+def log_residual(f, ref, cos_i):
+    """ln(1 + f cos th_i) - ln(1 + f_ref cos th_i): the ``log`` loss's residual before weighting."""
+    return transform("log", f, cos_i, None) - transform("log", ref, cos_i, None)
+
+
+def log_rmse(f, ref, cos_i, used):
+    """The one ``log_rmse`` (SPEC 5): RMS of :func:`log_residual` over the used samples (``used``
+    (N, 1) or (..., 1) in {0, 1}) and every channel, equally weighted. Fit metrics, compare rows,
+    validate's metrics.json and the table figure all call this."""
+    ld = log_residual(f, ref, cos_i) * used
+    n = jnp.sum(jnp.broadcast_to(used, ld.shape))
+    return jnp.sqrt(jnp.sum(ld**2) / jnp.maximum(n, 1))
+
+
 def residual(loss: str, f, ref, cos_i, sqrt_w, floor):
     """Per-sample, per-channel residuals (N, C) of model values f against reference values ref."""
     if loss == "relative":

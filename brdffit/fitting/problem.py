@@ -136,8 +136,7 @@ def loss_values(model: Model):
         n = jnp.sum(used) * f.shape[1]
         d = (f - ref) * used
         out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-        ld = (L.transform("log", f, cos_i, floor) - L.transform("log", ref, cos_i, floor)) * used
-        out["log_rmse"] = jnp.sqrt(jnp.sum(ld**2) / n)
+        out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
         out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
         out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
         out["max_abs_error"] = jnp.max(jnp.abs(d))

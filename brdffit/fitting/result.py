@@ -65,10 +65,54 @@ class FitResult:
     def n_params(self) -> int:
         return self.model.n_free
 
-    def eval(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N C"]:
-        """f_r of the fitted model at these directions (numpy, (N, C))."""
+    def eval(
+        self, wi: Float[np.ndarray, "N 3"] | Float[np.ndarray, "3"], wo: Float[np.ndarray, "N 3"] | Float[np.ndarray, "3"]
+    ) -> Float[np.ndarray, "N C"] | Float[np.ndarray, " C"]:
+        """f_r of the fitted model as a NumPy array (SPEC 5): (N, 3) directions give (N, C), a single
+        (3,) pair gives (C,), a (3,) direction against (N, 3) others is broadcast. Directions below
+        the horizon (z <= 0 for either) give 0. ``self.model.eval`` is the differentiable JAX form
+        ((N, 3) only, JAX arrays, no horizon test): use it inside ``jax.grad`` / ``jit``."""
+        wi = np.asarray(wi, dtype=np.float64)
+        wo = np.asarray(wo, dtype=np.float64)
+        if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,) or wi.ndim > 2 or wo.ndim > 2:
+            from ..errors import UsageError
+
+            raise UsageError(f"FitResult.eval needs directions of shape (3,) or (N, 3); got {wi.shape} and {wo.shape}")
+        single = wi.ndim == 1 and wo.ndim == 1
+        wi2, wo2 = np.broadcast_arrays(np.atleast_2d(wi), np.atleast_2d(wo))
         p = {k: jnp.asarray(v) for k, v in self.params.items()}
-        return np.asarray(self.model.eval(p, jnp.asarray(wi, dtype=jnp.float64), jnp.asarray(wo, dtype=jnp.float64)))
+        f = np.array(self.model.eval(p, jnp.asarray(wi2), jnp.asarray(wo2)), dtype=np.float64)
+        f[(wi2[:, 2] <= 0) | (wo2[:, 2] <= 0)] = 0.0
+        return f[0] if single else f
+
+    # -- Jupyter --------------------------------------------------------------------------------------
+    def _repr_png_(self) -> bytes:
+        """The fitted model on the UBO-81 grid (:func:`brdffit.plot.table`)."""
+        from ..plot import png_bytes, table
+
+        return png_bytes(table(self))
+
+    def _repr_html_(self) -> str:
+        import base64
+        import html
+
+        rows = "".join(
+            f"<tr><td>{html.escape(k)}</td><td>{html.escape(np.array2string(np.asarray(v), precision=4))}</td>"
+            f"<td>{'' if self.stderr.get(k) is None else html.escape(np.array2string(np.asarray(self.stderr[k]), precision=2))}</td></tr>"
+            for k, v in self.params.items()
+        )
+        metrics = ", ".join(f"{k} {v:.4g}" for k, v in self.metrics.items() if k in ("rmse", "log_rmse", "rel_rmse"))
+        colour = "green" if self.converged else "red"
+        img = base64.b64encode(self._repr_png_()).decode()
+        return (
+            f"<p><b>{html.escape(self.model.name)}</b> fit of <b>{html.escape(self.data_name)}</b> "
+            f"({html.escape(self.solver)}, {html.escape(self.loss)} loss): "
+            f"<span style='color:{colour}'>{html.escape(self.status)}</span>, {self.steps} steps, "
+            f"{self.seconds.get('run', 0.0):.3g} s run + {self.seconds.get('compile', 0.0):.3g} s compile<br>"
+            f"{html.escape(metrics)}</p>"
+            f"<table><tr><th>parameter</th><th>value</th><th>std. error</th></tr>{rows}</table>"
+            f"<img src='data:image/png;base64,{img}'/>"
+        )
 
     def to_mitsuba(self) -> dict:
         """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene, with the same

@@ -202,6 +202,11 @@ class Model:
             if not set(lobe.params) <= known:
                 raise ValueError(f"model {self.name!r}: lobe {lobe} names unknown parameters")
 
+    def __repr__(self) -> str:
+        # short: the docstring and formula are in help(model) / model.doc, not in every repr
+        ps = ", ".join(p.name if self.size(p) == 1 else f"{p.name}({self.size(p)})" for p in self.params)
+        return f"Model({self.name!r}: {ps}; {self.citation.splitlines()[0] if self.citation else ''})"
+
     # -- parameter table ------------------------------------------------------------------------
     def param(self, name: str) -> Param:
         for p in self.params:

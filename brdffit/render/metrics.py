@@ -87,16 +87,26 @@ def summarise(per_light: list[dict], reference: np.ndarray, test: np.ndarray, ma
 
 
 def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) -> dict[str, float]:
-    """Errors of the fitted 81x81 table against the reference on the valid entries (f_r, 1/sr)."""
-    ref = np.asarray(reference, np.float64)[valid]
-    fit = np.asarray(fitted, np.float64)[valid]
+    """Errors of the fitted 81x81 table against the reference on the valid entries (f_r, 1/sr);
+    ``log_rmse`` is the one definition of SPEC 5 (:func:`brdffit.fitting.losses.log_rmse`, with the
+    UBO-81 light's cos theta), the figure a fit reports."""
+    from ..fitting.losses import log_rmse
+    from ..grid import ubo_directions
+
+    ref_t = np.asarray(reference, np.float64)
+    fit_t = np.asarray(fitted, np.float64)
+    valid = np.broadcast_to(valid, ref_t.shape)
+    ref = ref_t[valid]
+    fit = fit_t[valid]
     d = fit - ref
     rmse = float(np.sqrt(np.mean(d * d)))
     ref_rms = float(np.sqrt(np.mean(ref * ref)))
-    log_d = np.log1p(np.maximum(fit, 0)) - np.log1p(np.maximum(ref, 0))
+    cos_l = np.clip(ubo_directions()[:, 2], 1e-7, 1.0)[:, None, None]
+    used = valid.astype(np.float64)
+    lrmse = log_rmse(np.where(valid, fit_t, 0.0), np.where(valid, ref_t, 0.0), cos_l, used)
     return {
         "rmse": rmse,
         "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
-        "log_rmse": float(np.sqrt(np.mean(log_d * log_d))),
+        "log_rmse": float(lrmse),
         "valid_pairs": int(np.count_nonzero(np.all(valid, axis=-1) if valid.ndim == 3 else valid)),
     }

@@ -37,18 +37,35 @@ def light_directions(lights) -> Float[np.ndarray, "L 3"]:
 
     Angles are radians, theta from +z, phi from +x counter-clockwise seen from +z (SPEC 1).
     """
+    from ..errors import UsageError
+
     a = np.asarray(lights, np.float64)
     if a.ndim == 1:
         a = a[None]
     if a.ndim != 2 or a.shape[1] not in (2, 3) or a.shape[0] == 0:
-        raise ValueError(f"lights must be (L, 3) directions or (L, 2) (theta, phi) pairs, got shape {a.shape}")
+        raise UsageError(f"lights must be (L, 3) directions or (L, 2) (theta, phi) pairs, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise UsageError("light directions must be finite")
     if a.shape[1] == 2:
         t, p = a[:, 0], a[:, 1]
+        if np.any(np.abs(a) > 2 * np.pi):
+            k = int(np.argmax(np.any(np.abs(a) > 2 * np.pi, axis=1)))
+            raise UsageError(f"light (theta, phi) = ({a[k, 0]:g}, {a[k, 1]:g}) is not in radians: degrees? "
+                             "use np.radians(...)")
+        if np.any((t < 0) | (t > np.pi / 2)):
+            k = int(np.argmax((t < 0) | (t > np.pi / 2)))
+            raise UsageError(f"light theta = {t[k]:g} rad ({np.degrees(t[k]):.0f} deg) is below the horizon (degrees? use np.radians): "
+                             "theta must be in [0, pi/2] (radians, from +z towards the camera)")
         a = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
     norm = np.linalg.norm(a, axis=1, keepdims=True)
-    if not np.all(np.isfinite(a)) or np.any(norm == 0):
-        raise ValueError("light directions must be finite and non-zero")
-    return a / norm
+    if np.any(norm == 0):
+        raise UsageError("light directions must be non-zero")
+    a = a / norm
+    if np.any(a[:, 2] < -1e-12):
+        k = int(np.argmax(a[:, 2] < -1e-12))
+        raise UsageError(f"light direction {tuple(float(x) for x in a[k])} is below the horizon (z < 0): the camera "
+                         "looks from +z, so lights need z >= 0")
+    return a
 
 
 def pixel_centres(size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -136,9 +153,9 @@ def render_sphere(
     v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,
     pointing right at the image centre; see the module docstring).
     """
+    dirs = light_directions(lights)  # bad lights (degrees, below the horizon) fail before any work
     mi = mitsuba()
     src: Source = as_source(source)
-    dirs = light_directions(lights)
     size = int(size)
     if size < 1 or spp < 1:
         raise ValueError("size and spp must be >= 1")

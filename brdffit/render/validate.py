@@ -4,8 +4,10 @@ Written files (in ``out``, atomically: the folder appears complete or not at all
 
 - ``reference_tTT_pPPP.exr``, ``fit_tTT_pPPP.exr``: linear radiance per light (theta, phi of the
   light in integer degrees), 32-bit float RGB OpenEXR.
-- ``panel_tTT_pPPP.png``: reference | fit | error heat map with a colour bar, per light.
-- ``table.png``: the 81x81 UBO tables, measured | fitted | error; ``table_reference.exr`` and
+- ``panel_tTT_pPPP.png``: reference | fit | signed error per channel (R, G, B) with a colour bar,
+  per light (:func:`brdffit.plot.sphere_panel`).
+- ``table.png``: the 81x81 UBO tables, measured | fitted | log residual per channel
+  (:func:`brdffit.plot.compare_table`); ``table_reference.exr`` and
   ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr; entries a measured
   table marks invalid are NaN in the reference table and left out of the table metrics).
 - ``metrics.json``: rmse, relative_rmse, psnr, flip per light and overall (see
@@ -62,6 +64,26 @@ class Validation:
         return (
             f"Validation({len(self.lights)} lights, {self.reference.shape[1]} px: rmse {o['rmse']:.4g}, "
             f"psnr {o['psnr']:.1f} dB, flip {o['flip']:.3f}; {len(self.files)} files)"
+        )
+
+    def _repr_png_(self) -> bytes:
+        """Reference and fit spheres under every light (:func:`brdffit.plot.spheres`)."""
+        from ..plot import png_bytes, spheres
+
+        return png_bytes(spheres(self))
+
+    def _repr_html_(self) -> str:
+        import base64
+        import html
+
+        o, t = self.metrics["overall"], self.metrics.get("table", {})
+        img = base64.b64encode(self._repr_png_()).decode()
+        table = (f"; 81x81 table: RMSE {t['rmse']:.4g} 1/sr, log-RMSE {t['log_rmse']:.4g}" if t else "")
+        return (
+            f"<p><b>Validation</b> of {html.escape(str(self.metrics.get('fit', 'fit')))} against "
+            f"{html.escape(str(self.metrics.get('reference', 'reference')))}: {len(self.lights)} lights, "
+            f"{self.reference.shape[1]} px; RMSE {o['rmse']:.4g}, PSNR {o['psnr']:.1f} dB, FLIP {o['flip']:.3f}"
+            f"{html.escape(table)}</p><img src='data:image/png;base64,{img}'/>"
         )
 
 
@@ -196,9 +218,7 @@ def validate(
             _write_exr(tmp / "table_fit.exr", tab_fit)
             files += [Path(out) / "table_reference.exr", Path(out) / "table_fit.exr"]
             lap("write exr")
-            from .panels import SpherePanels, table_panel
-
-            panels = SpherePanels(int(size), ref_src.label, fit_src.label, irradiance)
+            from .. import plot
         per_light = []
         for k, d in enumerate(dirs):
             m = futures[k].result()
@@ -208,7 +228,9 @@ def validate(
             tell("metrics", k + 1, len(dirs))
             if tmp is not None:
                 tag = _tag(d)
-                panels.write(tmp / f"panel_{tag}.png", ref_imgs[k], fit_imgs[k], scales[k], d, per_light[k])
+                fig = plot.sphere_panel(ref_imgs[k], fit_imgs[k], d, metrics=per_light[k], scale=scales[k],
+                                        ref_label=ref_src.label, fit_label=fit_src.label, irradiance=irradiance)
+                fig.savefig(tmp / f"panel_{tag}.png", dpi=90, pil_kwargs={"compress_level": 1})
                 files.append(Path(out) / f"panel_{tag}.png")
                 tell("panels", k + 1, len(dirs) + 1)
         overall = summarise(per_light, ref_imgs, fit_imgs, mask)
@@ -224,8 +246,10 @@ def validate(
             "table": table,
         }
         if tmp is not None:
-            panels.close()
-            table_panel(tmp / "table.png", tab_ref, tab_fit, ref_src.label, fit_src.label, table)
+            fig = plot.compare_table(tab_ref, tab_fit, title=(
+                f"UBO-81 table, {fit_src.label} against {ref_src.label}: RMSE {table['rmse']:.3g} 1/sr   "
+                f"rel. RMSE {table['relative_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
+            fig.savefig(tmp / "table.png", dpi=90, pil_kwargs={"compress_level": 1})
             files.append(Path(out) / "table.png")
             tell("panels", len(dirs) + 1, len(dirs) + 1)
             lap("metrics and panels")
