@@ -140,9 +140,9 @@ def test_fit_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys):
     src = tmp_path / "src.npz"
     brdffit.save(_ubo_measurement(), src)
     out = tmp_path / "fitout"
-    import brdffit.plot
+    import brdffit.plot as plot_module
 
-    monkeypatch.setattr(brdffit.plot, "fit_figure", lambda *a, **k: _FailingFigure())
+    monkeypatch.setattr(plot_module, "fit_figure", lambda *a, **k: _FailingFigure())
     code, _, err = _run(capsys, "fit", src, "-m", "lambert", "-o", out)
     assert code == 3, err
     assert not out.exists() and _leftovers(tmp_path, out) == []
@@ -169,9 +169,9 @@ def test_compare_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys
 
 def test_demo_failing_half_way_leaves_no_folder(tmp_path, monkeypatch):
     import brdffit.demo as demo
-    import brdffit.plot
+    import brdffit.plot as plot_module
 
-    monkeypatch.setattr(brdffit.plot, "table", lambda *a, **k: _FailingFigure())
+    monkeypatch.setattr(plot_module, "table", lambda *a, **k: _FailingFigure())
     out = tmp_path / "demo"
     with pytest.raises(Boom):
         demo.run_demo(out)

@@ -155,7 +155,7 @@ def test_models_command_lists_every_model(capsys):
         model = models.get(name)
         assert f"\n{name}  (" in "\n" + out
         assert model.citation.splitlines()[0] in out
-    assert "alpha  1         0.0001  1" in out  # ggx's bounds
+    assert "alpha  1         [1e-4, inf)  [1e-4, 1]" in out  # ggx's bounds and physical range
     assert "`lambert+ggx` is the same function as `ggx`" in out
 
 
