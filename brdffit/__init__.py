@@ -35,6 +35,10 @@ _LAZY = {
     "render_sphere": "brdffit.render",
     "validate": "brdffit.render",
     "Validation": "brdffit.render",
+    "scene_usage": "brdffit.scene",
+    "render_scene": "brdffit.scene",
+    "validate_scene": "brdffit.scene",
+    "Usage": "brdffit.scene",
 }
 
 

@@ -190,6 +190,7 @@ def fit(
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
     weights=None,
+    scene=None,
     grid_budget: int = _init.GRID_BUDGET,
     scipy_jac: str = "exact",
 ) -> FitResult:
@@ -200,8 +201,11 @@ def fit(
     params dict (missing parameters take their defaults) or a FitResult. multistart: polish this
     many further grid starts and keep the best; None (default) polishes AUTO_RETRIES further
     starts only when the first solve does not converge. Non-convergence is reported in ``.status``, never
-    raised; parameters are never NaN.
+    raised; parameters are never NaN. scene: a ``brdffit.scene.Usage`` (``brdffit.scene_usage``):
+    the samples are weighted by where that scene looks (``usage.weights``), times ``weights``.
     """
+    if scene is not None:  # SPEC 12
+        weights = scene.weights(measurement) * (1.0 if weights is None else np.asarray(weights, np.float64))
     loss = check_loss(loss)
     solver = check_solver(solver)
     if max_steps < 1:
