@@ -75,7 +75,9 @@ def plot_fit(measurement, result, path: Path) -> None:
 @click.option("--max-steps", default=200, show_default=True)
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
-def fit_command(source, model, loss, solver, multistart, max_steps, out, force) -> int:
+@click.option("--scene", default=None, type=click.Path(path_type=str), help="Mitsuba 3 scene: fit where it looks at --material.")
+@click.option("--material", default=None, help="Id of the BSDF in --scene that this fit is for.")
+def fit_command(source, model, loss, solver, multistart, max_steps, out, force, scene, material) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from rich.console import Console
 
@@ -90,12 +92,20 @@ def fit_command(source, model, loss, solver, multistart, max_steps, out, force) 
     check_solver(solver)
     resolve_model(model, 3)  # unknown model -> usage error before any work
     console = Console(stderr=True)
-    with console.status(f"loading {source}"):
-        m = load(source)
+    usage = None
+    if scene is not None or material is not None:  # SPEC 12: scene-aware fit
+        from ..scene.usage import cli_usage
+
+        with console.status(f"recording where {scene} looks at {material!r}"):
+            m, usage = cli_usage(source, scene, material)
+    else:
+        with console.status(f"loading {source}"):
+            m = load(source)
     out = out or Path(f"fit-{m.name}-{model.replace('+', '_')}")
     check_target(out, force)
     with console.status(f"fitting {model} to {m.name} ({loss} loss, {solver})"):
-        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps)
+        r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps,
+                scene=usage)
     with atomic_dir(out, force) as tmp:
         r.to_json(tmp / "fit.json")
         plot_fit(m, r, tmp / "fit.png")

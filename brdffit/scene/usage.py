@@ -47,6 +47,11 @@ from ..errors import UsageError
 from ._drjit import python_bsdf_render
 from .load import load_scene, replaced, scene_name
 
+#: Weight of the pairs the scene does not use, relative to its most used ones. Measured with
+#: benchmarks/bench_scene.py (grazing floor, 4 RGL materials, ggx): at 0.3 the scene's FLIP
+#: gains 0.03-0.19 and the sphere validation loses less than that on every material; at 0.1 the
+#: scene gains hardly more and one material's sphere FLIP loses more (0.16) than its scene gains.
+DEFAULT_FLOOR = 0.3
 #: Path length used for integrators with unbounded depth (``max_depth = -1``).
 MAX_DEPTH_CAP = 8
 #: Rec. 709 luminance of linear RGB: the scalar a contribution is measured in.
@@ -132,6 +137,18 @@ class Usage:
         """The pairs as (theta_h, theta_d, phi_d) radians, phi_d folded (:func:`rusinkiewicz`)."""
         return rusinkiewicz(self.wi, self.wo)
 
+    def sample(self, n: int = 2048, *, seed: int = 0) -> tuple[Float[np.ndarray, "n 3"], Float[np.ndarray, "n 3"]]:
+        """``n`` of the recorded pairs (wi, wo), drawn without replacement in proportion to their
+        contribution: directions at which to sample a source that can be evaluated anywhere (RGL,
+        MERL, UTIA: ``brdffit.load(path, wi=..., wo=...)``), so a fit sees data where the scene
+        looks, e.g. beyond the 75 degrees the UBO-81 grid reaches."""
+        k = len(self)
+        if k == 0:
+            raise UsageError(f"{self.scene}: the scene never shows {self.material!r} lit: no pairs to sample")
+        rng = np.random.default_rng(seed)
+        take = rng.choice(k, size=min(int(n), k), replace=False, p=self.weight / self.weight.sum())
+        return self.wi[take].copy(), self.wo[take].copy()
+
     def density(self, wi, wo, *, bandwidth_deg: float = 5.0) -> Float[np.ndarray, " N"]:
         """Usage density at the pairs (wi, wo), relative to its maximum (in [0, 1]).
 
@@ -153,7 +170,7 @@ class Usage:
         at = np.degrees(rusinkiewicz(wi, wo)).T
         return np.clip(map_coordinates(grid / peak, at, order=1, mode="nearest"), 0.0, 1.0)
 
-    def weights(self, measurement, *, bandwidth_deg: float = 5.0, floor: float = 1e-2) -> Float[np.ndarray, " N"]:
+    def weights(self, measurement, *, bandwidth_deg: float = 5.0, floor: float = DEFAULT_FLOOR) -> Float[np.ndarray, " N"]:
         """Sample weights (N,) for ``measurement``'s directions: where this scene looks, floored.
 
         Parameterisation: Rusinkiewicz's half/difference angles (theta_h, theta_d, phi_d). For the
@@ -162,8 +179,9 @@ class Usage:
         symmetry fold phi_d into [0, 90] degrees, so a pair and its swapped twin count as one
         (with (theta_i, theta_o, |dphi|) a lobe is a diagonal band and a kernel blurs across it).
 
-        The weight is :meth:`density` (maximum 1) raised to ``floor``: no sample is dropped (a
-        fit still sees the whole table, faintly) unless ``floor=0`` is asked. Samples below the
+        The weight is :meth:`density` (maximum 1) raised to ``floor`` (default
+        :data:`DEFAULT_FLOOR`): no sample is dropped (a fit still sees the whole table) unless
+        ``floor=0`` is asked. Samples below the
         horizon get the floor too; the fit leaves them out anyway.
         """
         if not 0.0 <= floor <= 1.0:
@@ -171,6 +189,27 @@ class Usage:
         wi = np.asarray(measurement.wi, np.float64)
         wo = np.asarray(measurement.wo, np.float64)
         return np.maximum(self.density(wi, wo, bandwidth_deg=bandwidth_deg), floor)
+
+
+def fit_data(source, usage: Usage, *, n: int = 2048, seed: int = 0):
+    """The measurement to fit for a scene: ``source`` (a path or a Measurement) read as usual, and,
+    when it can be evaluated anywhere (RGL, MERL, UTIA ``.bin``: ``brdffit.load`` takes ``wi, wo``),
+    sampled at the UBO-81 pairs *plus* ``n`` pairs drawn from ``usage`` (:meth:`Usage.sample`),
+    so the fit has data where the scene looks even beyond the grid's 75 degrees."""
+    from pathlib import Path
+
+    from ..grid import ubo_pairs
+    from ..io import detect_format, load
+    from ..measurement import Measurement
+
+    if isinstance(source, Measurement):
+        return source
+    path = Path(source)
+    if detect_format(path) not in ("rgl", "merl", "utia"):
+        return load(path)
+    uwi, uwo = ubo_pairs()
+    swi, swo = usage.sample(n, seed=seed)
+    return load(path, wi=np.concatenate([uwi, swi]), wo=np.concatenate([uwo, swo]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -329,3 +368,15 @@ def scene_usage(scene, material: str, *, spp: int = 16, seed: int = 0, source=No
     wo = wo[keep] / np.linalg.norm(wo[keep], axis=1, keepdims=True)
     return Usage(wi=wi, wo=wo, weight=w[keep], emitter_sampled=em[keep], scene=scene_name(scene), material=material,
                  pixels=pixels, spp=int(spp), max_depth=depth, seconds=time.perf_counter() - t0)
+
+
+def cli_usage(source: str, scene: str | None, material: str | None):
+    """``brdffit fit SOURCE --scene S --material ID``: (measurement to fit, usage), or UsageError."""
+    if scene is None or material is None:
+        raise UsageError("--scene and --material go together: the scene file and the id of the BSDF to fit for")
+    usage = scene_usage(scene, material, source=source)
+    if len(usage) == 0:
+        from ..errors import InputError
+
+        raise InputError(scene, f"the scene never shows {material!r} lit (no light reaches the camera through it)")
+    return fit_data(source, usage), usage
