@@ -76,6 +76,21 @@ def test_recorded_contributions_add_up_to_mitsubas_image(name, material):
     assert u.weight.sum() == pytest.approx(float((img @ LUM).sum()), rel=0.01)
 
 
+def test_recorded_contributions_under_an_area_light_add_up_to_mitsubas_image():
+    """Emitter samples and BSDF samples combined by MIS (an environment light, a glossy plate
+    filling the view): the sum still matches Mitsuba's own render."""
+    material = {"type": "roughconductor", "id": "plate", "alpha": 0.2}
+    scene = plate_scene(material)
+    del scene["light"]
+    scene["env"] = {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}}
+    scene["shape"]["to_world"] = mitsuba().ScalarTransform4f().scale(4.0)
+    mi = mitsuba()
+    u = scene_usage(scene, "plate", spp=16)
+    assert u.emitter_sampled.any() and (~u.emitter_sampled).any()
+    img = np.asarray(mi.render(mi.load_dict(scene), spp=256))[..., :3]
+    assert u.weight.sum() == pytest.approx(float((img @ LUM).sum()), rel=0.01)
+
+
 def test_ring_of_lights_sees_every_azimuth_and_bounces():
     u = scene_usage(SCENES / "ring_lights.xml", "object", spp=4)
     assert u.max_depth == 3
@@ -87,14 +102,15 @@ def test_ring_of_lights_sees_every_azimuth_and_bounces():
 
 def test_rusinkiewicz_known_values():
     # a (theta_h, theta_d, phi_d) pair built by hand: d in the half-vector frame, turned by theta_h about y
-    th, td, pd = np.radians([30.0, 40.0, 60.0])
+    th, td, pd = np.radians([30.0, 40.0, 120.0])
     d = np.array([np.sin(td) * np.cos(pd), np.sin(td) * np.sin(pd), np.cos(td)])
     wi = np.array([d[0] * np.cos(th) + d[2] * np.sin(th), d[1], -d[0] * np.sin(th) + d[2] * np.cos(th)])
     h = np.array([np.sin(th), 0.0, np.cos(th)])
     wo = 2 * (wi @ h) * h - wi
-    np.testing.assert_allclose(rusinkiewicz(wi, wo)[0], [th, td, pd], atol=1e-12)
+    # phi_d 120 degrees is folded to 60 (mirror symmetry about the plane of incidence)
+    np.testing.assert_allclose(rusinkiewicz(wi, wo)[0], [th, td, np.pi - pd], atol=1e-12)
     # swapping light and view is the same pair (reciprocity fold)
-    np.testing.assert_allclose(rusinkiewicz(wo, wi)[0], [th, td, pd], atol=1e-12)
+    np.testing.assert_allclose(rusinkiewicz(wo, wi)[0], [th, td, np.pi - pd], atol=1e-12)
     # mirror direction: theta_h 0, theta_d = theta; retro-reflection: theta_h = theta, theta_d 0
     a = _dir(50.0, 10.0)
     np.testing.assert_allclose(rusinkiewicz(a, a * [-1, -1, 1])[0, :2], np.radians([0.0, 50.0]), atol=1e-7)
