@@ -44,6 +44,10 @@ _LAZY = {
     "ParameterMaps": "brdffit.btf",
     "validate_btf": "brdffit.btf",
     "BTFValidation": "brdffit.btf",
+    "scene_usage": "brdffit.scene",
+    "render_scene": "brdffit.scene",
+    "validate_scene": "brdffit.scene",
+    "Usage": "brdffit.scene",
 }
 # brdffit.plot is a module: `import brdffit.plot` or `brdffit.plot` after first use (lazy, below)
 

@@ -77,8 +77,10 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 @click.option("--physical", is_flag=True, help="Keep parameters in their plausible ranges (albedo <= 1, ...).")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fit-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
+@click.option("--scene", default=None, type=click.Path(path_type=str), help="Mitsuba 3 scene: fit where it looks at --material.")
+@click.option("--material", default=None, help="Id of the BSDF in --scene that this fit is for.")
 def fit_command(source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
-                force) -> int:
+                force, scene, material) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from contextlib import nullcontext
 
@@ -111,7 +113,15 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         if out is not None:  # checked, writable and locked before any work
             stack.enter_context(reserve(out, force, folder=True))
         status = stack.enter_context(console.status(f"reading {source}") if live else nullcontext())
-        m = load(source)
+        usage = None
+        if scene is not None or material is not None:  # SPEC 12: scene-aware fit
+            from ..scene.usage import cli_usage
+
+            if live:
+                status.update(f"recording where {scene} looks at {material!r}")
+            m, usage = cli_usage(source, scene, material)
+        else:
+            m = load(source)
         if out is None:
             out = Path(f"fit-{m.name}-{model.replace('+', '_')}")
             stack.enter_context(reserve(out, force, folder=True))
@@ -121,7 +131,7 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
                 status.update(f"{model} on {m.name}: {text}")
 
         r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress,
-                bounds=bounds, fixed=fixed, physical=physical)
+                bounds=bounds, fixed=fixed, physical=physical, scene=usage)
         progress("writing fit.json, fit.png")
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")

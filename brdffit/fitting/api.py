@@ -150,6 +150,7 @@ def fit(
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
     weights=None,
+    scene=None,
     scipy_jac: str = "exact",
     progress: Callable[[str], None] | None = None,
     bounds: Mapping[str, tuple] | None = None,
@@ -171,7 +172,12 @@ def fit(
     ``physical=True`` for its plausible ranges, ``bounds={"name": (lo, hi)}`` to narrow a box
     (None on a side keeps it), ``fixed={"name": value}`` to hold a parameter. Lobes of one kind
     come out narrowest first. ``.at_bound`` and ``.warnings`` report what the constraints decided.
+
+    scene: a ``brdffit.scene.Usage`` (``brdffit.scene_usage``, SPEC 12): the samples are weighted
+    by where that scene looks (``usage.weights``), times ``weights``.
     """
+    if scene is not None:  # SPEC 12
+        weights = scene.weights(measurement) * (1.0 if weights is None else np.asarray(weights, np.float64))
     note = progress or _quiet
     loss = check_loss(loss)
     solver = check_solver(solver)

@@ -1,0 +1,9 @@
+"""Scene-aware fitting (SPEC 12): where a user's Mitsuba 3 scene looks at a material, fit weights
+from it, and the scene rendered with a fit beside it rendered with the reference."""
+
+from __future__ import annotations
+
+from .render import SceneValidation, render_scene, validate_scene
+from .usage import Usage, rusinkiewicz, scene_usage
+
+__all__ = ["SceneValidation", "Usage", "render_scene", "rusinkiewicz", "scene_usage", "validate_scene"]
