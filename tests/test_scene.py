@@ -217,7 +217,7 @@ def test_cli_fit_with_scene(tmp_path):
 def test_plot_usage_returns_a_figure():
     from matplotlib.figure import Figure
 
-    from brdffit.scene.plot import usage as plot_usage
+    from brdffit.plot import usage as plot_usage
 
     fig = plot_usage(scene_usage(plate_scene(), "plate", spp=1))
     assert isinstance(fig, Figure) and len(fig.axes) >= 3

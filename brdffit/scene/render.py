@@ -146,7 +146,7 @@ def validate_scene(
     lap("metrics")
     files: list[Path] = []
     if out is not None:
-        from .plot import validation_panel
+        from ..plot import scene_panel as validation_panel
 
         with atomic_dir(Path(out), force=force) as tmp:
             _write_exr(tmp / "reference.exr", ref_img)
