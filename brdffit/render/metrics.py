@@ -95,6 +95,9 @@ def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) 
 
     ref_t = np.asarray(reference, np.float64)
     fit_t = np.asarray(fitted, np.float64)
+    valid = np.asarray(valid, bool)
+    if valid.ndim == ref_t.ndim - 1:  # one flag per (light, view) pair: the same for every channel
+        valid = valid[..., None]
     valid = np.broadcast_to(valid, ref_t.shape)
     ref = ref_t[valid]
     fit = fit_t[valid]
