@@ -4,6 +4,6 @@ from it, and the scene rendered with a fit beside it rendered with the reference
 from __future__ import annotations
 
 from .render import SceneValidation, render_scene, validate_scene
-from .usage import Usage, rusinkiewicz, scene_usage
+from .usage import Usage, fit_data, rusinkiewicz, scene_usage
 
-__all__ = ["SceneValidation", "Usage", "render_scene", "rusinkiewicz", "scene_usage", "validate_scene"]
+__all__ = ["SceneValidation", "Usage", "fit_data", "render_scene", "rusinkiewicz", "scene_usage", "validate_scene"]
