@@ -31,7 +31,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import jax
@@ -39,7 +38,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import brdffit
-from brdffit.fitting import api as _api
 from brdffit.fitting.problem import flat_residual, prepare, resolve_model
 
 REPO = Path(__file__).resolve().parents[1]
@@ -55,28 +53,6 @@ def data_files() -> list[Path]:
     if not files:
         sys.exit(f"no measurements found under {root}/measured (set BRDFFIT_DATA)")
     return files
-
-
-@contextmanager
-def ks_unbounded():
-    """Until the parameter-space work lands, brdffit's ggx bounds ks to [0, 1]; the hand-written
-    fit leaves ks >= 0 free, and so must the comparison: lift every finite upper bound of a
-    linear scale parameter (ks)."""
-    orig = _api.parameter_space
-
-    def space(model):
-        lo, hi, free = orig(model)
-        names = []
-        for p in model.params:
-            names += [p.name] * model.size(p)
-        lift = np.asarray([n == "ks" or n.endswith(".ks") for n in names])
-        return lo, np.where(lift, np.inf, hi), free
-
-    _api.parameter_space = space
-    try:
-        yield
-    finally:
-        _api.parameter_space = orig
 
 
 # -- the hand-written fit -----------------------------------------------------------------------
@@ -169,27 +145,26 @@ def main(argv=None) -> int:
         return bench_batch(args.batch)
     print(f"devices: {jax.devices()}, CPU cores: {os.cpu_count()} (ratios are within this run)", flush=True)
     rows = []
-    with ks_unbounded():
-        for path in data_files():
-            meas = brdffit.load(path)
-            hw_loss, hw_s, sol = hand_written(meas)
-            hw_s = statistics.median([hw_s] + [hand_written(meas)[1] for _ in range(args.repeat - 1)])
-            sc, sc_s = timed(lambda: brdffit.fit(meas, "ggx", solver="scipy", init=START), args.repeat)
-            d, d_s = timed(lambda: brdffit.fit(meas, "ggx"), args.repeat)
-            comp = None
-            if meas.grid == "ubo81":
-                comp, comp_s = timed(lambda: brdffit.fit(meas, "lambert+ggx+ggx"), args.repeat)
-            per_step = (d.seconds["run"] - d.seconds["init"]) / max(d.steps, 1)
-            row = dict(name=meas.name, hw=hw_loss, sc=sc.loss_value, d=d.loss_value, hw_s=hw_s, sc_s=sc_s, d_s=d_s,
-                       steps=d.steps, status=d.status, init_s=d.seconds["init"], per_step=per_step,
-                       comp=comp, comp_s=comp_s if comp else None)
-            rows.append(row)
-            print(f"{meas.name:26s} loss hand {hw_loss:.6e} scipy-jit {sc.loss_value:.6e} default {d.loss_value:.6e} "
-                  f"ratio {d.loss_value / hw_loss:.5f} | warm hand {hw_s * 1e3:.1f} ms ({sol.nfev} evals) scipy-jit "
-                  f"{sc_s * 1e3:.1f} ms default {d_s * 1e3:.1f} ms (init {d.seconds['init'] * 1e3:.1f} ms, {d.steps} steps, "
-                  f"{per_step * 1e3:.2f} ms/step, {d.status}) speed-up x{hw_s / d_s:.1f} / x{sc_s / d_s:.1f}"
-                  + (f" | lambert+ggx+ggx {comp.status}, loss/hand {comp.loss_value / hw_loss:.4f}, "
-                     f"{comp_s * 1e3:.0f} ms, {comp.steps} steps" if comp else ""), flush=True)
+    for path in data_files():
+        meas = brdffit.load(path)
+        hw_loss, hw_s, sol = hand_written(meas)
+        hw_s = statistics.median([hw_s] + [hand_written(meas)[1] for _ in range(args.repeat - 1)])
+        sc, sc_s = timed(lambda: brdffit.fit(meas, "ggx", solver="scipy", init=START), args.repeat)
+        d, d_s = timed(lambda: brdffit.fit(meas, "ggx"), args.repeat)
+        comp = None
+        if meas.grid == "ubo81":
+            comp, comp_s = timed(lambda: brdffit.fit(meas, "lambert+ggx+ggx"), args.repeat)
+        per_step = (d.seconds["run"] - d.seconds["init"]) / max(d.steps, 1)
+        row = dict(name=meas.name, hw=hw_loss, sc=sc.loss_value, d=d.loss_value, hw_s=hw_s, sc_s=sc_s, d_s=d_s,
+                   steps=d.steps, status=d.status, init_s=d.seconds["init"], per_step=per_step,
+                   comp=comp, comp_s=comp_s if comp else None)
+        rows.append(row)
+        print(f"{meas.name:26s} loss hand {hw_loss:.6e} scipy-jit {sc.loss_value:.6e} default {d.loss_value:.6e} "
+              f"ratio {d.loss_value / hw_loss:.5f} | warm hand {hw_s * 1e3:.1f} ms ({sol.nfev} evals) scipy-jit "
+              f"{sc_s * 1e3:.1f} ms default {d_s * 1e3:.1f} ms (init {d.seconds['init'] * 1e3:.1f} ms, {d.steps} steps, "
+              f"{per_step * 1e3:.2f} ms/step, {d.status}) speed-up x{hw_s / d_s:.1f} / x{sc_s / d_s:.1f}"
+              + (f" | lambert+ggx+ggx {comp.status}, loss/hand {comp.loss_value / hw_loss:.4f}, "
+                 f"{comp_s * 1e3:.0f} ms, {comp.steps} steps" if comp else ""), flush=True)
     flops = step_flops(brdffit.load(REPO / "data" / "sample_ubo81.exr"), "ggx")
 
     print()
