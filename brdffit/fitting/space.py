@@ -30,6 +30,7 @@ own (kd <= 1, ks <= 1), not their sum.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 
@@ -229,8 +230,17 @@ def sample_spacing(wo, max_directions: int = 2048) -> float:
     """Typical angular spacing (radians) of the distinct view directions ``wo`` (N, 3): the median
     angle from each to its nearest neighbour. 14.5 degrees on the UBO-81 grid (theta rings 15
     degrees apart, azimuth steps of 14.5 to 18 degrees of arc on the outer rings). Beyond
-    ``max_directions`` distinct directions a fixed random subset is used (an upper estimate)."""
-    w = np.unique(np.round(np.asarray(wo, dtype=np.float64), 9), axis=0)
+    ``max_directions`` distinct directions a fixed random subset is used (an upper estimate).
+
+    Every fit asks this (for its warnings), and a batch or a BTF asks it of the same directions
+    for every texel: the result is kept per distinct direction set."""
+    wo = np.ascontiguousarray(wo, dtype=np.float64)
+    return _sample_spacing(wo.tobytes(), wo.shape, max_directions)
+
+
+@functools.lru_cache(maxsize=8)
+def _sample_spacing(wo_bytes: bytes, shape: tuple[int, ...], max_directions: int) -> float:
+    w = np.unique(np.round(np.frombuffer(wo_bytes, dtype=np.float64).reshape(shape), 9), axis=0)
     w = w[w[:, 2] > 0]
     if len(w) < 2:
         return math.pi / 2
