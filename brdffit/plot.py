@@ -519,6 +519,22 @@ def pareto(report, metric: str = "loss_log") -> Figure:
 
 
 # -- scene-aware fitting (SPEC 12) -----------------------------------------------------------------
+def _usage_density(fig, ax, x, y, weight, labels: tuple[str, str], title: str) -> None:
+    """A weighted 2-D histogram of two angles in degrees (0..90, 2-degree bins), relative to its
+    maximum, on a log colour scale from 1e-3."""
+    from matplotlib.colors import LogNorm
+
+    bins = np.linspace(0, 90, 46)
+    h, _, _ = np.histogram2d(x, y, bins=(bins, bins), weights=weight)
+    h = h / h.max() if h.max() > 0 else h
+    im = ax.imshow(h.T, origin="lower", extent=(0, 90, 0, 90), norm=LogNorm(1e-3, 1.0), cmap="viridis",
+                   interpolation="nearest")
+    ax.set_xlabel(labels[0])
+    ax.set_ylabel(labels[1])
+    ax.set_title(title, fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.046, label="relative contribution")
+
+
 def usage(usage, measurement=None, *, bandwidth_deg: float = 5.0, floor: float = 1e-2):
     """Where a scene looks at its material (``usage`` from ``brdffit.scene_usage``).
 
@@ -553,26 +569,11 @@ def usage(usage, measurement=None, *, bandwidth_deg: float = 5.0, floor: float =
     fig.colorbar(im, ax=axes[0], fraction=0.046, label="weight")
 
     c = np.degrees(usage.coordinates())
-    bins = np.linspace(0, 90, 46)
-    h, _, _ = np.histogram2d(c[:, 0], c[:, 1], bins=(bins, bins), weights=usage.weight)
-    h = h / h.max() if h.max() > 0 else h
-    im = axes[1].imshow(h.T, origin="lower", extent=(0, 90, 0, 90), norm=LogNorm(1e-3, 1.0), cmap="viridis",
-                        interpolation="nearest")
-    axes[1].set_xlabel("θ_h [°]")
-    axes[1].set_ylabel("θ_d [°]")
-    axes[1].set_title("contribution to the image over (θ_h, θ_d)", fontsize=10)
-    fig.colorbar(im, ax=axes[1], fraction=0.046, label="relative contribution")
-
+    _usage_density(fig, axes[1], c[:, 0], c[:, 1], usage.weight, ("θ_h [°]", "θ_d [°]"),
+                   "contribution to the image over (θ_h, θ_d)")
     ti = np.degrees(np.arccos(np.clip(usage.wi[:, 2], -1, 1)))
     to = np.degrees(np.arccos(np.clip(usage.wo[:, 2], -1, 1)))
-    h, _, _ = np.histogram2d(ti, to, bins=(bins, bins), weights=usage.weight)
-    h = h / h.max() if h.max() > 0 else h
-    im = axes[2].imshow(h.T, origin="lower", extent=(0, 90, 0, 90), norm=LogNorm(1e-3, 1.0), cmap="viridis",
-                        interpolation="nearest")
-    axes[2].set_xlabel("θ light [°]")
-    axes[2].set_ylabel("θ view [°]")
-    axes[2].set_title("… over (θ light, θ view)", fontsize=10)
-    fig.colorbar(im, ax=axes[2], fraction=0.046, label="relative contribution")
+    _usage_density(fig, axes[2], ti, to, usage.weight, ("θ light [°]", "θ view [°]"), "… over (θ light, θ view)")
     fig.suptitle(f"where {usage.material!r} is seen in {usage.scene}: {len(usage)} pairs, "
                  f"{usage.pixels[0]}x{usage.pixels[1]} px, {usage.spp} spp", fontsize=11)
     return fig

@@ -30,7 +30,6 @@ render | error), ``metrics.json``. ``<pair>`` is ``tlTTT_plPPP_tvTTT_pvPPP``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import time
 from pathlib import Path

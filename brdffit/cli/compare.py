@@ -62,7 +62,6 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
     import contextlib
 
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from .. import load
     from .. import models as _models
     from .._files import atomic_dir, reserve
@@ -87,20 +86,7 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
         if out is None:
             out = Path(f"compare-{m.name}")
             stack.enter_context(reserve(out, force, folder=True))
-        total = len(models) * len(solvers) * len(losses)
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console) as progress:
-            task = progress.add_task("fitting", total=total)
-            state = {"n": 0}
-
-            def step(label):
-                if state["n"]:
-                    progress.advance(task)
-                state["n"] += 1
-                progress.update(task, description=f"fitting {label}")
-
-            report = compare(m, models, solvers, losses, progress=step)
-            progress.update(task, completed=total, description="done")
+        report = compare(m, models, solvers, losses, progress=True)
         with atomic_dir(out, force) as tmp:
             report.to_csv(tmp / "report.csv")
             report.to_json(tmp / "report.json")

@@ -170,10 +170,12 @@ def _progress_bar(total: int, show: bool):
     if not show:
         yield lambda label: None
         return
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    # On stderr, like every progress display of brdffit (stdout stays for results).
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  transient=False) as bar:
+                  console=Console(stderr=True), transient=False) as bar:
         task = bar.add_task("compare", total=total)
         started = {"n": 0}
 
