@@ -235,6 +235,10 @@ class Model:
         dtype = dtype or jnp.result_type(float)
         return {p.name: jnp.full((self.size(p),), p.default, dtype=dtype) for p in self.params}
 
+    def default_vector(self) -> np.ndarray:
+        """The defaults as a flat float64 NumPy vector (``flatten(defaults())`` without JAX)."""
+        return np.concatenate([np.full(self.size(p), p.default, dtype=np.float64) for p in self.params])
+
     def check_params(self, params: Params) -> dict[str, Array]:
         """Params as arrays of the declared sizes; raises ValueError naming what is wrong."""
         out = {}
