@@ -171,7 +171,11 @@ class Model:
     ``formula(params, wi, wo)`` gets a params dict (arrays of shape (size,)) and unit directions
     (N, 3) in the local frame, and returns f_r (N, channels) in 1/sr, without the cosine. It must
     be finite, with finite gradients, for every parameter in bounds and every direction in the
-    closed upper hemisphere (use the double-``where`` pattern for branches).
+    closed upper hemisphere (use the double-``where`` pattern for branches). Channel c of the
+    result may depend on channel c of a 3-channel parameter only (formulas written with
+    broadcasting do), and f_r must be affine in the parameters declared ``linear``: the solver
+    computes its Jacobians with that structure (``brdffit.fitting.structure``), and
+    ``brdffit.testing.model_problems`` checks both.
     """
 
     name: str
