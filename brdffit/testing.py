@@ -139,6 +139,8 @@ def _structure_problems(model: Model, x: np.ndarray, wi, wo) -> list[str]:
         x0 = jnp.where(jnp.asarray(lin), 0.0, x)
         pred = np.asarray(f(x0)) + np.einsum("ncp,p->nc", jac[:, :, lin], np.asarray(x)[lin])
         val = np.asarray(f(x))
+        if not (np.all(np.isfinite(val)) and np.all(np.isfinite(pred))):
+            return out  # non-finite values are reported above
         if not np.allclose(pred, val, rtol=1e-9, atol=1e-12 * max(np.abs(val).max(), 1e-300)):
             out.append(f"{model.name}: f_r is not affine in the parameters declared linear "
                        f"({', '.join(p.name for p in model.params if p.linear)})")
