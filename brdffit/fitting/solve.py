@@ -78,6 +78,7 @@ class _LMState(eqx.Module):
     # The normal equations at the current point, not the Jacobian: a small loop carry (the
     # (M, P) Jacobian would be copied through the loop at every step).
     c: Float[Array, ""]
+    c0: Float[Array, ""]  # the loss at the start (what a result must not exceed)
     g: Float[Array, " P"]
     H: Float[Array, "P P"]
     lam: Float[Array, ""]
@@ -139,7 +140,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         c, g, H = self._normal(fn, y, args)
         dtype = y.dtype
-        return _LMState(c=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
+        return _LMState(c=c, c0=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
                         done=jnp.asarray(False), result=optx.RESULTS.successful)
 
     def step(self, fn, y, args, options, state: _LMState, tags):
@@ -195,14 +196,14 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         stuck = (~accept) & (lam_next > 1e16)
         done = small_f | small_g | exact | stuck
         result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
-        new_state = _LMState(c=c_next, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result)
+        new_state = _LMState(c=c_next, c0=state.c0, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result)
         return y_next, new_state, None
 
     def terminate(self, fn, y, args, options, state: _LMState, tags):
         return state.done, state.result
 
     def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
-        return y, aux, {"loss": state.c, "jtj": state.H}
+        return y, aux, {"loss": state.c, "loss0": state.c0, "jtj": state.H}
 
 
 # -- optimistix's stock solvers on an unconstrained variable ------------------------------------
@@ -274,6 +275,10 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor)
         return 1e-26 * jnp.sum(r0 * r0)
 
+    def loss_of(v, data):
+        r = fn(v, data)
+        return r @ r
+
     if solver_name == "lm":
         ne = normal_equations(model, loss)
         # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
@@ -288,17 +293,20 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
                                               "loss_floor": loss_floor(data)},
                                      max_steps=max_steps, throw=False)
             # The iterate moves only to accepted points (finite, lower loss), so the final state's
-            # loss and J^T J are those of sol.value: nothing to evaluate again.
-            return sol.value, sol.stats["loss"], _status_code(sol.result), sol.stats["num_steps"], sol.stats["jtj"]
+            # loss and J^T J are those of sol.value. One residual checks that anyway (the result is
+            # never worse than the start, whatever a solver claims).
+            v, value, code, steps, jtj = sol.value, loss_of(sol.value, data), _status_code(sol.result), \
+                sol.stats["num_steps"], sol.stats["jtj"]
+            ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(value) & \
+                (value <= sol.stats["loss0"] * (1 + 1e-9) + loss_floor(data))
+            code = jnp.where(ok | (code != 0), code, 2)
+            return (jnp.where(ok, v, v0), jnp.where(ok, value, sol.stats["loss0"]), code, steps,
+                    jnp.where(ok, jtj, jnp.nan))
 
         return run
 
     solver = make_solver(solver_name, rtol, atol)
     jtj = gauss_newton_matrix(model, loss)
-
-    def loss_of(v, data):
-        r = fn(v, data)
-        return r @ r
 
     def run(v0, data, lo, hi, free):
         """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
