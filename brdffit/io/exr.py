@@ -29,7 +29,7 @@ from .._files import atomic_file
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..measurement import Measurement
-from ._common import meta_from_json, meta_to_json, native_stderr_captured
+from ._common import device_copy, meta_from_json, meta_to_json, native_stderr_captured
 from .npz import check_usable
 
 FORMAT_TAG = "ubo81-table/1"
@@ -157,4 +157,5 @@ def read(path, *, name: str | None = None) -> Measurement:
         meta["name"] = name
     meta.setdefault("name", path.stem)
     meta.setdefault("source", str(path))
+    wi, wo, values, weights = (device_copy(a) for a in (wi, wo, values, weights))
     return Measurement(wi=wi, wo=wo, values=values, weights=weights, extra=extra, **meta)
