@@ -7,7 +7,7 @@ busy machine inflates less than wall), the load average, and where one second pr
 time: interpreter start, imports, reading, fitting, fit.json, building and writing fit.png,
 interpreter exit. The phases are timed inside an unmodified ``brdffit`` process by wrapping the
 functions ``brdffit fit`` calls (``brdffit.load``, ``brdffit.fitting.fit``, ``FitResult.to_json``,
-``brdffit.plot.fit_figure``, ``Figure.savefig``); "imports and the rest" is what is left of the
+``brdffit.plot.fit_figure``, ``Figure.savefig``); "the rest of the command" is what is left of the
 time inside the command.
 
     python benchmarks/bench_cli.py [--repeat 5] [--model ggx] [SOURCE]
