@@ -89,12 +89,14 @@ def check(proc: subprocess.CompletedProcess, out: Path) -> None:
         raise SystemExit(f"brdffit fit failed (exit {proc.returncode}): {proc.stderr.strip()[-800:]}")
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("source", nargs="?", default=str(REPO / "data" / "sample_ubo81.exr"))
-    ap.add_argument("--model", default="ggx")
-    ap.add_argument("--repeat", type=int, default=5, help="second processes timed (median, min)")
-    args = ap.parse_args(argv)
+SAMPLE = str(REPO / "data" / "sample_ubo81.exr")
+
+
+def cli_times(repeat: int = 3, source: str = SAMPLE, model: str = "ggx", phases: bool = False):
+    """(first, seconds, phases): (wall, CPU) of a first ``brdffit fit SOURCE --model MODEL -o DIR``
+    process (empty compile cache) and of ``repeat`` second ones; with ``phases``, the report of one
+    more, instrumented second process (else None). A run that fails or writes no fit.json /
+    fit.png raises SystemExit (a crash must not pass for a fast run)."""
     exe = Path(sys.executable).with_name("brdffit")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "brdffit"]
     with tempfile.TemporaryDirectory() as tmp:
@@ -102,22 +104,34 @@ def main(argv=None) -> int:
         env = dict(os.environ, BRDFFIT_CACHE=str(tmp / "cache"), PYTHONPATH=str(REPO))
 
         def fit_cmd(out: Path, prefix=cmd) -> list[str]:
-            return [*prefix, "fit", args.source, "--model", args.model, "-o", str(out)]
+            return [*prefix, "fit", source, "--model", model, "-o", str(out)]
 
         first, first_cpu, proc = run(fit_cmd(tmp / "first"), env)
         check(proc, tmp / "first")
         seconds = []
-        for i in range(args.repeat):
+        for i in range(repeat):
             wall, cpu, proc = run(fit_cmd(tmp / f"second{i}"), env)
             check(proc, tmp / f"second{i}")
             seconds.append((wall, cpu))
-        report = tmp / "phases.json"
-        started = time.time()
-        wall, _, proc = run(fit_cmd(tmp / "phases", [sys.executable, "-c", CHILD]),
-                            dict(env, BENCH_CLI_REPORT=str(report)))
-        ended = time.time()
-        check(proc, tmp / "phases")
-        phases = json.loads(report.read_text())
+        report = None
+        if phases:
+            started = time.time()
+            wall, _, proc = run(fit_cmd(tmp / "phases", [sys.executable, "-c", CHILD]),
+                                dict(env, BENCH_CLI_REPORT=str(tmp / "phases.json")))
+            ended = time.time()
+            check(proc, tmp / "phases")
+            report = dict(json.loads((tmp / "phases.json").read_text()), started=started, ended=ended, wall=wall)
+    return (first, first_cpu), seconds, report
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("source", nargs="?", default=SAMPLE)
+    ap.add_argument("--model", default="ggx")
+    ap.add_argument("--repeat", type=int, default=5, help="second processes timed (median, min)")
+    args = ap.parse_args(argv)
+    (first, first_cpu), seconds, phases = cli_times(args.repeat, args.source, args.model, phases=True)
+    started, ended, wall = phases["started"], phases["ended"], phases["wall"]
     walls, cpus = [s[0] for s in seconds], [s[1] for s in seconds]
     print(f"brdffit fit {Path(args.source).name} --model {args.model} -o DIR   (load average "
           f"{os.getloadavg()[0]:.1f}, {os.cpu_count()} CPUs)")
