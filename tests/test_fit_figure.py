@@ -139,3 +139,20 @@ entry()
     assert run.returncode == 2, run.stderr
     assert "/nonexistent/table.exr" in run.stderr and "Traceback" not in run.stderr
     assert run.stdout.strip() == "atexit (100000, 50, 1000) True"
+
+
+def test_importing_brdffit_leaves_the_collector_as_it_found_it():
+    """``import brdffit`` pauses the cyclic collector while JAX loads, and restores the caller's
+    setting: off stays off, on stays on."""
+    code = """
+import gc
+for enabled in (False, True):
+    (gc.enable if enabled else gc.disable)()
+    for name in [m for m in list(__import__("sys").modules) if m == "brdffit" or m.startswith("brdffit.")]:
+        del __import__("sys").modules[name]
+    import brdffit
+    print(enabled, gc.isenabled())
+"""
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["False", "False", "True", "True"]
