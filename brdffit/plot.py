@@ -162,8 +162,8 @@ def _ring_ticks(ax, n_light: bool = True) -> None:
     labels = [f"{t}°" for t in UBO_THETA_DEG]
     ax.set_xticks(centres, labels, fontsize=7)
     ax.set_yticks(centres, labels, fontsize=7)
-    # Two line collections, not one line per boundary (10 lines per panel were a third of the
-    # time of the CLI's fit figure); the limits stay the image's.
+    # Two line collections per panel, not a line artist per ring boundary (50 in the fit figure);
+    # the limits stay the image's.
     edges = starts[1:-1] - 0.5
     end = starts[-1] - 0.5
     ax.hlines(edges, -0.5, end, color="white", lw=0.4, alpha=0.6)
@@ -187,11 +187,10 @@ def _log_colourbar(fig, lo: float, hi: float, label: str, **where):
     axes) or ``cax=`` (an axes of its own)."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import LogNorm
+    from matplotlib.ticker import StrMethodFormatter
 
     if "ax" in where:
         where.update(fraction=0.046, pad=0.03)
-    from matplotlib.ticker import StrMethodFormatter
-
     cb = fig.colorbar(ScalarMappable(LogNorm(lo, hi), cmap="gray"), **where)
     # Decades as plain numbers (0.01, 0.1, 1): the default 10^k labels go through mathtext, whose
     # parser costs ~40 ms to build in every process that draws them.
