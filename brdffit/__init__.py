@@ -6,16 +6,28 @@ importing brdffit enables ``jax_enable_x64`` (float32 inputs stay float32).
 
 from __future__ import annotations
 
+import gc as _gc
 import importlib
 
-import jax
+# Importing JAX and equinox creates ~10^6 long-lived objects and hardly any garbage: the cyclic
+# collector would walk them again and again while they load (~0.08 s CPU of every `brdffit`
+# command, which imports this package before it can tune the collector). Paused for these
+# imports only; the caller's setting is restored.
+_collecting = _gc.isenabled()
+_gc.disable()
+try:
+    import jax
 
-jax.config.update("jax_enable_x64", True)
+    jax.config.update("jax_enable_x64", True)
 
-from . import models  # noqa: E402
-from .errors import InputError, UsageError  # noqa: E402
-from .grid import ubo_angles, ubo_directions, ubo_pairs  # noqa: E402
-from .measurement import Measurement  # noqa: E402
+    from . import models
+    from .errors import InputError, UsageError
+    from .grid import ubo_angles, ubo_directions, ubo_pairs
+    from .measurement import Measurement
+finally:
+    if _collecting:
+        _gc.enable()
+    del _collecting
 
 __version__ = "0.1.0"
 

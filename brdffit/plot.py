@@ -31,6 +31,7 @@ Conventions shared by the figures
 
 from __future__ import annotations
 
+import functools
 import io
 
 import numpy as np
@@ -161,9 +162,14 @@ def _ring_ticks(ax, n_light: bool = True) -> None:
     labels = [f"{t}°" for t in UBO_THETA_DEG]
     ax.set_xticks(centres, labels, fontsize=7)
     ax.set_yticks(centres, labels, fontsize=7)
-    for s in starts[1:-1]:
-        ax.axhline(s - 0.5, color="white", lw=0.4, alpha=0.6)
-        ax.axvline(s - 0.5, color="white", lw=0.4, alpha=0.6)
+    # Two line collections per panel, not a line artist per ring boundary (50 in the fit figure);
+    # the limits stay the image's.
+    edges = starts[1:-1] - 0.5
+    end = starts[-1] - 0.5
+    ax.hlines(edges, -0.5, end, color="white", lw=0.4, alpha=0.6)
+    ax.vlines(edges, -0.5, end, color="white", lw=0.4, alpha=0.6)
+    ax.set_xlim(-0.5, end)
+    ax.set_ylim(end, -0.5)
     ax.set_xlabel("view θ ring (φ increases within a ring)", fontsize=8)
     ax.set_ylabel("light θ ring", fontsize=8)
 
@@ -176,11 +182,19 @@ def _excluded_legend(ax, n: int) -> None:
                   bbox_to_anchor=(0.5, -0.16), fontsize=7, frameon=False)
 
 
-def _log_colourbar(fig, ax, lo: float, hi: float, label: str):
+def _log_colourbar(fig, lo: float, hi: float, label: str, **where):
+    """The grey log-scale bar of the 81x81 displays; ``where``: ``ax=`` (room taken from those
+    axes) or ``cax=`` (an axes of its own)."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import LogNorm
+    from matplotlib.ticker import StrMethodFormatter
 
-    cb = fig.colorbar(ScalarMappable(LogNorm(lo, hi), cmap="gray"), ax=ax, fraction=0.046, pad=0.03)
+    if "ax" in where:
+        where.update(fraction=0.046, pad=0.03)
+    cb = fig.colorbar(ScalarMappable(LogNorm(lo, hi), cmap="gray"), **where)
+    # Decades as plain numbers (0.01, 0.1, 1): the default 10^k labels go through mathtext, whose
+    # parser costs ~40 ms to build in every process that draws them.
+    cb.ax.yaxis.set_major_formatter(StrMethodFormatter("{x:g}"))
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
     return cb
@@ -197,10 +211,27 @@ def table(measurement_or_fit, *, title: str | None = None) -> Figure:
     ax = fig.add_subplot()
     ax.imshow(_log_rgb(values, valid, lo, hi), interpolation="nearest")
     _ring_ticks(ax)
-    _log_colourbar(fig, ax, lo, hi, "f_r per channel (1/sr), log scale")
+    _log_colourbar(fig, lo, hi, "f_r per channel (1/sr), log scale", ax=ax)
     _excluded_legend(ax, int(np.count_nonzero(~valid)))
     ax.set_title(title or f"{label}: f_r on the UBO-81 grid (81 lights × 81 views)", fontsize=9)
     return fig
+
+
+# Fixed geometry of compare_table, in inches: no layout engine (constrained layout measured every
+# text of the figure several times: about two thirds of the time ``brdffit fit`` spent on fit.png).
+_PANEL = 3.1  # side of each square 81x81 panel
+_GAP = 0.85  # between panels: the next panel's tick labels and axis label
+_LEFT = 0.75  # tick labels and axis label of the first column
+_BAR_PAD, _BAR_W, _BAR_LABEL = 0.15, 0.14, 0.95  # colour bars: gap, width, room for ticks and label
+_TITLE = 0.3  # a panel's title
+_SUPTITLE = 0.5
+_X_AXIS = 0.6  # tick labels and axis label under a panel
+_LEGEND = 0.25  # the excluded-samples legend under the measured panel
+
+
+def _inch_axes(fig, left: float, bottom: float, width: float, height: float):
+    w, h = fig.get_size_inches()
+    return fig.add_axes((left / w, bottom / h, width / w, height / h))
 
 
 def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
@@ -209,8 +240,6 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
 
     ``measurement``: a UBO-81 Measurement or an (81, 81, C) table (NaN = excluded); ``fit``: a
     FitResult (evaluated at the measurement's own directions) or an (81, 81, C) table."""
-    from .fitting.losses import log_rmse
-
     ref, valid, cos_l, ref_label = _grid_table(measurement)
     if _is_fit(fit):
         from .measurement import Measurement
@@ -225,42 +254,78 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
         fitted, _, _, fit_label = _grid_table(fit)
     valid = valid & np.all(np.isfinite(fitted), axis=-1)
     lo, hi = log_range(ref, valid)
-    residual = np.array(log_residual(fitted, ref, cos_l[..., None]))
+    residual, lrmse = _residual_and_log_rmse(fitted, ref, cos_l[..., None], valid[..., None])
     residual[~valid] = np.nan
     v3 = np.broadcast_to(valid[..., None], ref.shape)
     d = (fitted - ref)[v3]
     rmse = float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
-    v = valid[..., None]
-    lrmse = float(log_rmse(np.where(v, fitted, 0.0), np.where(v, ref, 0.0), cos_l[..., None], v.astype(np.float64)))
 
     names = _channel_names(ref.shape[-1])
-    fig = _figure((4.0 * max(len(names), 2) + 1.0, 8.6), layout="constrained")
-    grid = fig.add_gridspec(2, 2 * len(names) if len(names) > 1 else 2)
-    half = grid.ncols // 2
-    ax_m = fig.add_subplot(grid[0, :half])
-    ax_f = fig.add_subplot(grid[0, half:])
+    cols = max(len(names), 2)
+    row = _PANEL + _TITLE
+    bars_x = _LEFT + cols * _PANEL + (cols - 1) * _GAP + _BAR_PAD
+    fig = _figure((bars_x + _BAR_W + _BAR_LABEL, _X_AXIS + row + _X_AXIS + _LEGEND + row + _SUPTITLE))
+    top_y = _X_AXIS + row + _X_AXIS + _LEGEND
+    ax_m = _inch_axes(fig, _LEFT, top_y, _PANEL, _PANEL)
+    ax_f = _inch_axes(fig, _LEFT + _PANEL + _GAP, top_y, _PANEL, _PANEL)
     for ax, img, name in ((ax_m, ref, f"measured: {ref_label}"), (ax_f, fitted, f"fitted: {fit_label}")):
         ax.imshow(_log_rgb(img, valid, lo, hi), interpolation="nearest")
         ax.set_title(name, fontsize=9)
         _ring_ticks(ax)
-    _log_colourbar(fig, [ax_m, ax_f], lo, hi, "f_r per channel (1/sr), log scale")
+    _log_colourbar(fig, lo, hi, "f_r per channel (1/sr), log scale",
+                   cax=_inch_axes(fig, _LEFT + 2 * _PANEL + _GAP + _BAR_PAD, top_y, _BAR_W, _PANEL))
     _excluded_legend(ax_m, int(np.count_nonzero(~valid)))
+    if _is_fit(fit) and cols >= 3:  # the free slot of the top row: what the fit found
+        text_x = _LEFT + 2 * _PANEL + _GAP + _BAR_PAD + _BAR_W + _BAR_LABEL
+        fig.text(text_x / fig.get_size_inches()[0], (top_y + _PANEL) / fig.get_size_inches()[1],
+                 _fit_summary(fit), fontsize=8, va="top", ha="left", family="monospace")
     lim = _sym_limit(residual)
     cmap = _diverging()
-    err_axes = []
-    width = grid.ncols // len(names)
     for c, name in enumerate(names):
-        ax = fig.add_subplot(grid[1, c * width:(c + 1) * width])
+        ax = _inch_axes(fig, _LEFT + c * (_PANEL + _GAP), _X_AXIS, _PANEL, _PANEL)
         im = ax.imshow(residual[..., c], cmap=cmap, vmin=-lim, vmax=lim, interpolation="nearest")
         ax.set_title(f"{name}: fitted − measured (log residual)", fontsize=9)
         _ring_ticks(ax)
-        err_axes.append(ax)
-    cb = fig.colorbar(im, ax=err_axes, fraction=0.03, pad=0.02)
+    cb = fig.colorbar(im, cax=_inch_axes(fig, _LEFT + len(names) * (_PANEL + _GAP) - _GAP + _BAR_PAD, _X_AXIS,
+                                         _BAR_W, _PANEL))
     cb.set_label("ln(1 + f_fit cos θ_l) − ln(1 + f_meas cos θ_l)\nred: fit too bright, blue: too dark", fontsize=8)
     cb.ax.tick_params(labelsize=7)
     fig.suptitle(title or f"UBO-81 table: RMSE {rmse:.3g} 1/sr   log-RMSE {lrmse:.3g} (RMS of the residual shown)",
-                 fontsize=10)
+                 fontsize=10, y=1.0 - 0.12 / fig.get_size_inches()[1], va="top")
     return fig
+
+
+def _fit_summary(fit) -> str:
+    """Parameter values of a fit, one line each (``fit.json`` has them in full)."""
+    lines = [f"{fit.model_name} fit, {fit.steps} steps, {fit.loss} loss {fit.loss_value:.4g}"]
+    width = max(len(k) for k in fit.params)
+    for name, value in fit.params.items():
+        values = " ".join(f"{x:.4g}" for x in np.asarray(value, np.float64).reshape(-1))
+        lines.append(f"{name:<{width}}  {values}")
+    return "\n".join(lines)
+
+
+def _residual_and_log_rmse(fitted, ref, cos_l, used) -> tuple[np.ndarray, float]:
+    """(the signed log residual, log_rmse over ``used``) of losses.log_residual / log_rmse, in one
+    compiled program (evaluated op by op, the two were ~15 small programs compiled per process)."""
+    residual, lrmse = _residual_program()(np.asarray(fitted, np.float64), np.asarray(ref, np.float64),
+                                          np.asarray(cos_l, np.float64), np.asarray(used, np.float64))
+    return np.array(residual), float(lrmse)
+
+
+@functools.cache
+def _residual_program():
+    import jax
+    import jax.numpy as jnp
+
+    from .fitting.losses import log_residual as _lr
+    from .fitting.losses import log_rmse
+
+    def run(fitted, ref, cos_l, used):
+        inside = used > 0
+        return _lr(fitted, ref, cos_l), log_rmse(jnp.where(inside, fitted, 0.0), jnp.where(inside, ref, 0.0), cos_l, used)
+
+    return jax.jit(run)
 
 
 def _diverging():

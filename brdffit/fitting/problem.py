@@ -92,7 +92,10 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     # Relative to the data (see losses: a table scaled by 1e-12 fits as the original).
     floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
     reasons = {k: v for k, v in exclusion_reasons(m).items() if v}
-    data = Data(*(jnp.asarray(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
+    # device_put, not jnp.asarray: the latter compiles a copy program per shape (~10-40 ms each in a
+    # new process). device_put may share these arrays' memory, which is safe: they were made above
+    # and nothing else holds them.
+    data = Data(*(jax.device_put(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
     return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
 
 

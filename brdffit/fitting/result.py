@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 from pathlib import Path
 from typing import Any
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 from jaxtyping import Float
 
@@ -17,6 +18,13 @@ from ..models.base import Model
 from .fitfile import check_fit_document, parse_fit_text
 
 FORMAT = "brdffit.fit/1"
+
+
+@functools.lru_cache(maxsize=None)
+def _eval_program(model: Model):
+    """``model.eval`` as one compiled program (per model and shape; JAX's persistent cache keeps it
+    across processes). Evaluated op by op it compiled ~60 small programs in every new process."""
+    return jax.jit(model.eval)
 
 
 def _floats(a) -> list[float]:
@@ -80,8 +88,8 @@ class FitResult:
             raise UsageError(f"FitResult.eval needs directions of shape (3,) or (N, 3); got {wi.shape} and {wo.shape}")
         single = wi.ndim == 1 and wo.ndim == 1
         wi2, wo2 = np.broadcast_arrays(np.atleast_2d(wi), np.atleast_2d(wo))
-        p = {k: jnp.asarray(v) for k, v in self.params.items()}
-        f = np.array(self.model.eval(p, jnp.asarray(wi2), jnp.asarray(wo2)), dtype=np.float64)
+        p = {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
+        f = np.array(_eval_program(self.model)(p, wi2, wo2), dtype=np.float64)
         f[(wi2[:, 2] <= 0) | (wo2[:, 2] <= 0)] = 0.0
         return f[0] if single else f
 

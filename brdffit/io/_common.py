@@ -104,3 +104,13 @@ def native_stderr_captured():
                 os.close(old)
                 sink.seek(0)
                 captured.append(sink.read().decode("utf-8", "replace"))
+
+
+def device_copy(a) -> "jax.Array":
+    """A float64 copy of ``a`` as a JAX array, for a reader's Measurement. (``Measurement`` takes
+    NumPy arrays through ``jnp.asarray``, which compiles a copy program per array shape: ~10-40 ms
+    each in a new process. ``device_put`` of a private copy compiles nothing; the copy matters,
+    as ``device_put`` may share the memory of a NumPy array on the CPU.)"""
+    import jax
+
+    return jax.device_put(np.array(a, dtype=np.float64, copy=True))

@@ -19,7 +19,6 @@ Any other 81 x 81 RGB (or Y) EXR is read as a UBO-81 table on the nominal grid.
 from __future__ import annotations
 
 import base64
-import gc
 import json
 import zlib
 from pathlib import Path
@@ -30,7 +29,7 @@ from .._files import atomic_file
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..measurement import Measurement
-from ._common import meta_from_json, meta_to_json, native_stderr_captured
+from ._common import device_copy, meta_from_json, meta_to_json, native_stderr_captured
 from .npz import check_usable
 
 FORMAT_TAG = "ubo81-table/1"
@@ -88,6 +87,12 @@ def write(m: Measurement, path, *, force: bool = False) -> None:
         OpenEXR.File(header, channels).write(str(tmp))
 
 
+def _exr_contents(OpenEXR, path: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """(header, channel name -> pixels copied out): no OpenEXR object outlives this call."""
+    f = OpenEXR.File(str(path), separate_channels=True)
+    return dict(f.header()), {k: np.array(v.pixels) for k, v in f.channels().items()}
+
+
 def read(path, *, name: str | None = None) -> Measurement:
     import OpenEXR
 
@@ -101,16 +106,15 @@ def read(path, *, name: str | None = None) -> Measurement:
         raise InputError(path, "not an OpenEXR file (wrong magic number)")
     problem = None
     # The library prints its own messages (some when its objects are freed): they would add
-    # lines to the CLI's one, so they are captured, and the objects freed inside the capture.
+    # lines to the CLI's one, so they are captured, and the objects freed inside the capture:
+    # they live only in _exr_contents' frame (no reference cycles), so they are freed when it
+    # returns or when the exception that left it is dropped below. (A gc.collect() here cost
+    # ~85 ms with JAX loaded, 3 % of a `brdffit fit`.)
     with native_stderr_captured():
         try:
-            f = OpenEXR.File(str(path), separate_channels=True)
-            header = dict(f.header())
-            chans = {k: np.array(v.pixels) for k, v in f.channels().items()}
-            del f
+            header, chans = _exr_contents(OpenEXR, path)
         except Exception as exc:  # noqa: BLE001 - the OpenEXR library's message, on one line
             problem = " ".join(str(exc).split())[:200]
-        gc.collect()
     if problem is not None:
         raise InputError(path, f"unreadable OpenEXR (truncated or corrupt): {problem}")
     if {"R", "G", "B"} <= set(chans):
@@ -153,4 +157,5 @@ def read(path, *, name: str | None = None) -> Measurement:
         meta["name"] = name
     meta.setdefault("name", path.stem)
     meta.setdefault("source", str(path))
+    wi, wo, values, weights = (device_copy(a) for a in (wi, wo, values, weights))
     return Measurement(wi=wi, wo=wo, values=values, weights=weights, extra=extra, **meta)
