@@ -21,13 +21,21 @@ Every process must be able to read the BTF (a shared file system, or its own cop
 numbers do not depend on the split: each texel is fitted by the same compiled code from the same
 data, so one process and several give identical maps.
 
-Neighbouring texels' results as starts: not used yet: ``fit_batch`` takes no starts (it runs its
-initialisation grid for every texel). When it does, tile t can start from its fitted neighbour's
-border texels; the grid is most of a texel's cost today.
+Neighbouring texels' results as starts (``neighbours=True``, the default). Inside a tile the
+texels are fitted in passes over nested lattices (:func:`neighbour_passes`, strides 4, 2, 1):
+the first pass (1/16 of the texels) starts from the initialisation grid like ``fit``, every
+later texel starts from the result of its nearest texel fitted in an earlier pass (1 or 1.4
+texels away), without the grid. Measured (steps of the solve, mean over the texels, losses equal
+to the grid-started fits within 1e-7 relative): a 32 x 32 region of the benchmark's 64 x 64 ggx
+BTF, 4.06 -> 3.46; a 16 x 16 mosaic of the 4 RGL materials, 7.75 -> 1.42 (a region's texels hold
+one table: the neighbour's result is the answer); a 16 x 16 ggx BTF with maps that change fast
+from texel to texel, 4.27 -> 4.30 (the grid is still skipped for 15/16 of the texels). Within a
+tile only, so that tiles stay independent (resuming, several processes).
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -43,38 +51,127 @@ from .maps import ParameterMaps
 from .reader import BTF
 
 RUN_FILE = "run.json"
-#: Texels per call of fit_batch (bounds its memory; see _fit_tile).
+#: Texels per call of fit_batch (bounds its memory; see _fit_texels).
 GROUP = 16
+#: Lattice strides of the passes over a tile (see neighbour_passes): 1/16 of the texels start
+#: from the initialisation grid, the others from a fitted neighbour 1-2 texels away.
+STRIDES = (4, 2, 1)
 
 
 def _tile_file(folder: Path, t: int) -> Path:
     return folder / f"tile_{t:05d}.npz"
 
 
-def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict) -> dict[str, np.ndarray]:
-    """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps."""
-    from ..fitting import fit_batch
+def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The order in which the texels of an h x w tile are fitted, and where each one starts.
 
+    Pass k fits the texels of the lattice of stride ``strides[k]`` (row and column multiples of
+    it) that no earlier pass fitted; the last pass fits every texel left. Returns one
+    ``(texels, sources)`` pair per pass (flat row-major indices): ``sources[i]`` is the nearest
+    texel fitted in an earlier pass (its result starts texel ``texels[i]``), -1 in the first pass
+    (the initialisation grid starts those)."""
+    r, c = np.divmod(np.arange(h * w), w)
+    done = np.zeros(h * w, bool)
+    out = []
+    for k, s in enumerate(strides):
+        todo = ~done if k == len(strides) - 1 else (r % s == 0) & (c % s == 0) & ~done
+        texels = np.flatnonzero(todo)
+        if not len(texels):
+            continue
+        if not done.any():
+            sources = np.full(len(texels), -1)
+        else:
+            fitted = np.flatnonzero(done)
+            # Nearest by Euclidean distance in texels; ties go to the first in row-major order.
+            d2 = (r[texels, None] - r[None, fitted]) ** 2 + (c[texels, None] - c[None, fitted]) ** 2
+            sources = fitted[np.argmin(d2, axis=1)]
+        out.append((texels, sources))
+        done[texels] = True
+    return out
+
+
+def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours: bool = True) -> dict[str, np.ndarray]:
+    """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps.
+
+    With ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse
+    lattice of texels from the initialisation grid, every later one starts each texel from its
+    nearest fitted neighbour (see the module docstring for what that saves)."""
     values = btf.tile_values(t)  # (h, w, 6561, C) float32
     h, w = values.shape[:2]
     ms = [btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]")
           for r in range(h) for c in range(w)]
+    n = len(ms)
+    flat = np.zeros((n, mdl.n_free))
+    out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
+    passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]
+    for texels, sources in passes:
+        starts = None if sources[0] < 0 else flat[sources]
+        v, value, converged, steps = _fit_texels([ms[i] for i in texels], mdl, loss, batch_options, starts)
+        flat[texels] = v
+        out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
+    out = {k: a.reshape(h, w) for k, a in out.items()}
+    i = 0
+    for p in mdl.params:
+        out[f"param:{p.name}"] = flat[:, i : i + mdl.size(p)].reshape(h, w, -1)
+        i += mdl.size(p)
+    return out
+
+
+def _fit_texels(ms: list, mdl, loss: str, batch_options: dict, starts=None):
+    """fit_batch of these texels (from ``starts`` (n, P) when given): flat params (n, P), loss,
+    converged, steps."""
+    from ..fitting import fit_batch
+
     # fit_batch in groups of GROUP texels: its initialisation grid holds every texel of a call at
     # once (measured: 64 ggx texels per call, 6.6 GB peak; 256, killed). The last group is padded
     # (repeating a texel), so that every call has one shape and compiles once.
     n = len(ms)
-    group = min(GROUP, btf.tile * btf.tile)
-    ms += ms[-1:] * (-n % group)
+    group = min(GROUP, n)
+    pad = -n % group
+    ms = ms + ms[-1:] * pad
+    if starts is not None:
+        starts = np.concatenate([starts, np.repeat(starts[-1:], pad, axis=0)])
     results = []
     for s in range(0, len(ms), group):
-        results += fit_batch(ms[s : s + group], mdl, loss=loss, **batch_options)
+        if starts is None:
+            results += [(np.asarray(mdl.flatten(r.params)), r.loss_value, r.converged, r.steps)
+                        for r in fit_batch(ms[s : s + group], mdl, loss=loss, **batch_options)]
+        else:
+            results += _fit_batch_from(ms[s : s + group], mdl, loss, starts[s : s + group], batch_options)
     results = results[:n]
-    out = {f"param:{p.name}": np.stack([np.asarray(res.params[p.name], np.float64) for res in results]).reshape(h, w, -1)
-           for p in mdl.params}
-    out["loss"] = np.array([res.loss_value for res in results]).reshape(h, w)
-    out["converged"] = np.array([res.converged for res in results]).reshape(h, w)
-    out["steps"] = np.array([res.steps for res in results]).reshape(h, w)
-    return out
+    return (np.stack([r[0] for r in results]), np.array([r[1] for r in results]),
+            np.array([r[2] for r in results], bool), np.array([r[3] for r in results], int))
+
+
+def _fit_batch_from(ms: list, mdl, loss: str, starts, batch_options: dict) -> list[tuple]:
+    """PROTOTYPE SHIM, to be replaced by ``fit_batch(..., starts=)`` when that lands: fit_batch's
+    solve from the given starts (clipped to the box), without the initialisation grid."""
+    import jax
+    import jax.numpy as jnp
+
+    from ..fitting import api
+    from ..fitting.problem import Data, prepare
+    from ..fitting.solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
+
+    opts = {"max_steps": DEFAULT_MAX_STEPS, "rtol": DEFAULT_RTOL, "atol": DEFAULT_ATOL, "solver": api.DEFAULT_SOLVER,
+            **batch_options}
+    space = api.parameter_space(mdl, opts.get("bounds"), opts.get("fixed"), opts.get("physical", False))
+    lo, hi, free = jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free)
+    preps = [prepare(m) for m in ms]
+    data = Data(*(jnp.stack([p.data[i] for p in preps]) for i in range(6)))
+    solve = _solve_at(mdl, loss, opts["solver"], opts["rtol"], opts["atol"], opts["max_steps"])
+    v0 = jnp.asarray(space.clip(np.asarray(starts)))[:, None, :]
+    v, value, code, steps = (np.asarray(a) for a in jax.block_until_ready(solve(v0, data, lo, hi, free))[:4])
+    return [(space.canonical(space.clip(v[i])), float(value[i]), int(code[i]) == 0, int(steps[i])) for i in range(len(ms))]
+
+
+@functools.lru_cache(maxsize=None)
+def _solve_at(mdl, loss, solver, rtol, atol, max_steps):
+    import jax
+
+    from ..fitting import batch as _batch
+
+    return jax.jit(_batch._solve_batched(mdl, loss, solver, rtol, atol, max_steps, 1))
 
 
 def _save_tile(folder: Path, t: int, arrays: dict) -> None:
@@ -137,6 +234,7 @@ def fit_btf(
     force: bool = False,
     progress: bool | None = None,
     max_tiles: int | None = None,
+    neighbours: bool = True,
     **batch_options,
 ) -> ParameterMaps:
     """Fit ``model`` to every texel of ``btf``; see the module docstring.
@@ -145,7 +243,8 @@ def fit_btf(
     to ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
     the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
     ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
-    splitting work by hand).
+    splitting work by hand). ``neighbours``: start most texels from a fitted neighbour's result
+    (see the module docstring); False starts every texel from the initialisation grid.
     """
     import jax
 
@@ -158,6 +257,7 @@ def fit_btf(
     if solver is not None:
         batch_options["solver"] = solver
     run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},
+           "neighbours": bool(neighbours),
            "tile": btf.tile, "shape": [btf.height, btf.width]}
     pid, nproc = jax.process_index(), jax.process_count()
 
@@ -206,7 +306,7 @@ def fit_btf(
         for t in todo:
             if max_tiles is not None and fitted >= max_tiles:
                 return None
-            arrays = _fit_tile(btf, t, mdl, loss, batch_options)
+            arrays = _fit_tile(btf, t, mdl, loss, batch_options, neighbours)
             if tiles_dir is not None:
                 _save_tile(tiles_dir, t, arrays)
             results[t] = arrays
@@ -224,7 +324,7 @@ def fit_btf(
             "devices": [str(d) for d in jax.devices()],
             "texels_fitted_now": int(n_fitted) if nproc == 1 else None,
             "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
-            "resumed_tiles": len(mine) - len(todo)}
+            "resumed_tiles": len(mine) - len(todo), "neighbours": bool(neighbours)}
     pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],
                        steps=maps["steps"], loss_name=loss, solver=str(batch_options.get("solver", _default_solver())),
                        info=info)

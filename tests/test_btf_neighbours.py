@@ -1,0 +1,85 @@
+"""fit_btf's neighbour starts (issue 11): the order of the passes over a tile, and that a texel
+started from its neighbour's result ends where a start from the grid ends."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.btf import fit as btf_fit
+from brdffit.btf import generate as gen
+
+
+def test_passes_of_a_4x4_tile_by_hand():
+    passes = btf_fit.neighbour_passes(4, 4, strides=(4, 2, 1))
+    assert len(passes) == 3
+    (t1, s1), (t2, s2), (t3, s3) = passes
+    # pass 1: the stride-4 lattice is texel (0, 0) alone, started by the grid
+    assert t1.tolist() == [0] and s1.tolist() == [-1]
+    # pass 2: the rest of the stride-2 lattice, (0,2) (2,0) (2,2), all nearest to (0,0)
+    assert t2.tolist() == [2, 8, 10] and s2.tolist() == [0, 0, 0]
+    # pass 3: every other texel from its nearest of (0,0) (0,2) (2,0) (2,2); ties to the first
+    # in row-major order: (0,1) is 1 from (0,0) and (0,2) -> (0,0); (1,3) is sqrt 2 from (0,2)
+    # and (2,2) -> (0,2); (3,3) -> (2,2); (3,0) -> (2,0); (1,1) is sqrt 2 from all four -> (0,0)
+    want = {1: 0, 3: 2, 4: 0, 5: 0, 6: 2, 7: 2, 9: 8, 11: 10, 12: 8, 13: 8, 14: 10, 15: 10}
+    assert t3.tolist() == sorted(want) and s3.tolist() == [want[t] for t in sorted(want)]
+
+
+@pytest.mark.parametrize("shape", [(16, 16), (5, 7), (1, 3), (1, 1)])
+def test_passes_cover_every_texel_once_from_earlier_passes(shape):
+    h, w = shape
+    passes = btf_fit.neighbour_passes(h, w)
+    seen = np.concatenate([t for t, _ in passes])
+    assert sorted(seen.tolist()) == list(range(h * w))
+    assert (passes[0][1] == -1).all()
+    done = set(passes[0][0].tolist())
+    for texels, sources in passes[1:]:
+        assert set(sources.tolist()) <= done
+        # a neighbour, not any fitted texel: within the previous lattice's cell (stride 4 -> 2 * sqrt 2)
+        r, c = np.divmod(texels, w)
+        rs, cs = np.divmod(sources, w)
+        assert np.sqrt((r - rs) ** 2 + (c - cs) ** 2).max() <= 2 * np.sqrt(2) + 1e-12
+        done |= set(texels.tolist())
+    if h * w >= 16:  # most texels start from a neighbour
+        assert len(passes[0][0]) <= h * w / 8
+
+
+@pytest.fixture(scope="module")
+def small_ggx(tmp_path_factory):
+    model = brdffit.models.get("ggx")
+    maps = gen.smooth_maps(model, 6, 6, seed=5)
+    return gen.write_model_btf(tmp_path_factory.mktemp("sg") / "btf", model, maps, noise=0.01, seed=6)
+
+
+def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
+    btf = brdffit.load_btf(small_ggx, tile=6)
+    calls = []
+    real = btf_fit._fit_texels
+
+    def recorded(ms, mdl, loss, options, starts=None):
+        out = real(ms, mdl, loss, options, starts)
+        calls.append(([m.name for m in ms], None if starts is None else np.array(starts), out[0]))
+        return out
+
+    monkeypatch.setattr(btf_fit, "_fit_texels", recorded)
+    with_nb = brdffit.fit_btf(btf, "ggx", progress=False)
+    assert [c[1] is None for c in calls] == [True, False, False]  # the grid for the first pass only
+    # every later texel started from the result of its nearest earlier-fitted texel
+    fitted = {}
+    for names, starts, v in calls:
+        if starts is not None:
+            for name, s in zip(names, starts):
+                r, c = (int(x) for x in name[name.index("[") + 1 : -1].split(","))
+                near = min(fitted, key=lambda k: ((k[0] - r) ** 2 + (k[1] - c) ** 2, k))
+                np.testing.assert_array_equal(s, fitted[near])
+        for name, x in zip(names, v):
+            fitted[tuple(int(y) for y in name[name.index("[") + 1 : -1].split(","))] = x
+    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
+    assert with_nb.converged.all() and grid_only.converged.all()
+    np.testing.assert_allclose(with_nb.loss, grid_only.loss, rtol=1e-6)
+    for k in grid_only.params:
+        if k != "f0":  # not determined by one table next to ks (see generate.smooth_maps)
+            np.testing.assert_allclose(with_nb.params[k], grid_only.params[k], rtol=1e-3, err_msg=k)
+    assert with_nb.info["neighbours"] and not grid_only.info["neighbours"]
