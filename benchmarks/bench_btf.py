@@ -2,12 +2,15 @@
 
 A generated ``ggx`` BTF (default 64 x 64 texels, smooth parameter maps, 1% noise, EXR images in a
 temporary folder) is read with ``load_btf`` and fitted with ``fit_btf``; in the same run a loop of
-``brdffit.fit`` over a sample of its texels gives the baseline. Printed: the device(s) JAX runs
-on, texels/s of both (compile included for fit_btf, as a user sees it; the loop is warmed up
-first), their ratio, the losses' agreement on the sampled texels, the process's peak resident
-memory and the BTF's memory figures.
+``brdffit.fit`` over a random sample of ``--loop`` texels (not all of them: at ~3 fits/s the
+whole 64 x 64 would take half an hour) gives the baseline. Printed: the device(s) JAX runs on,
+texels/s of both (compile included for fit_btf, as a user sees it; the loop is warmed up first),
+their ratio, the steps of the solves (mean, median, max, and how many texels took each count),
+the losses' agreement on the sampled texels, the process's peak resident memory and the BTF's
+memory figures. ``--compare`` also runs ``fit_btf(..., neighbours=False)`` (every texel from the
+initialisation grid) in the same run: what the neighbour starts save.
 
-    python benchmarks/bench_btf.py [--size 64] [--loop 16] [--model ggx] [--tile 16]
+    python benchmarks/bench_btf.py [--size 64] [--loop 16] [--model ggx] [--tile 16] [--compare]
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ def main() -> None:
     ap.add_argument("--loop", type=int, default=16, help="texels fitted one by one with fit() for the baseline")
     ap.add_argument("--model", default="ggx")
     ap.add_argument("--tile", type=int, default=16)
+    ap.add_argument("--compare", action="store_true", help="also fit every texel from the grid (neighbours=False)")
     args = ap.parse_args()
 
     import jax
@@ -59,18 +63,29 @@ def main() -> None:
         singles = [brdffit.fit(btf.texel(r, c), model) for r, c in sample]
         loop_s = time.perf_counter() - t
         loop_rate = len(sample) / loop_s
-        print(f"loop of fit(): {len(sample)} texels in {loop_s:.1f} s = {loop_rate:.2f} texels/s (warm)")
+        print(f"loop of fit(): a random sample of {len(sample)} of the {args.size * args.size} texels in {loop_s:.1f} s = "
+              f"{loop_rate:.2f} texels/s (warm)")
 
-        t = time.perf_counter()
-        maps = brdffit.fit_btf(btf, model, progress=False)
-        fit_s = time.perf_counter() - t
         n = args.size * args.size
-        rate = n / fit_s
-        print(f"fit_btf: {n} texels in {fit_s:.1f} s = {rate:.2f} texels/s (compile included); "
-              f"{int(maps.converged.sum())}/{n} converged")
-        print(f"ratio fit_btf / loop of fit: {rate / loop_rate:.2f}x   (target >= 100 texels/s, aim 300)")
-        dev = [abs(maps.loss[r, c] - s.loss_value) / s.loss_value for (r, c), s in zip(sample, singles)]
-        print(f"loss of fit_btf vs fit on the sampled texels: max relative difference {max(dev):.2e}")
+        runs = [True, False] if args.compare else [True]
+        rates = {}
+        for neighbours in runs:
+            t = time.perf_counter()
+            maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours)
+            fit_s = time.perf_counter() - t
+            rate = rates[neighbours] = n / fit_s
+            steps = maps.steps.ravel()
+            counts = np.bincount(steps)
+            print(f"fit_btf (neighbours={neighbours}): {n} texels in {fit_s:.1f} s = {rate:.2f} texels/s (compile included); "
+                  f"{int(maps.converged.sum())}/{n} converged")
+            print(f"  steps: mean {steps.mean():.2f}, median {np.median(steps):.0f}, max {steps.max()}; texels per step count "
+                  + ", ".join(f"{k}: {c}" for k, c in enumerate(counts) if c))
+            print(f"  ratio fit_btf / loop of fit: {rate / loop_rate:.2f}x   (target >= 100 texels/s, aim 300)")
+            dev = [abs(maps.loss[r, c] - s.loss_value) / s.loss_value for (r, c), s in zip(sample, singles)]
+            print(f"  loss of fit_btf vs fit on the sampled texels: max relative difference {max(dev):.2e}")
+            print(f"  peak RSS so far: {peak_rss_mb():.0f} MB")
+        if args.compare:
+            print(f"neighbour starts vs grid starts: {rates[True] / rates[False]:.2f}x texels/s")
         print(f"peak RSS of this process: {peak_rss_mb():.0f} MB")
 
 

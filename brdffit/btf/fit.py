@@ -35,7 +35,6 @@ tile only, so that tiles stay independent (resuming, several processes).
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import shutil
@@ -151,7 +150,8 @@ def _fit_batch_from(ms: list, mdl, loss: str, starts, batch_options: dict) -> li
 
     from ..fitting import api
     from ..fitting.problem import Data, prepare
-    from ..fitting.solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
+    from ..fitting import batch as _batch
+    from ..fitting.solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, compiled
 
     opts = {"max_steps": DEFAULT_MAX_STEPS, "rtol": DEFAULT_RTOL, "atol": DEFAULT_ATOL, "solver": api.DEFAULT_SOLVER,
             **batch_options}
@@ -159,19 +159,12 @@ def _fit_batch_from(ms: list, mdl, loss: str, starts, batch_options: dict) -> li
     lo, hi, free = jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free)
     preps = [prepare(m) for m in ms]
     data = Data(*(jnp.stack([p.data[i] for p in preps]) for i in range(6)))
-    solve = _solve_at(mdl, loss, opts["solver"], opts["rtol"], opts["atol"], opts["max_steps"])
     v0 = jnp.asarray(space.clip(np.asarray(starts)))[:, None, :]
+    # fit_batch's own compiled solve (same key and shapes: one program, compiled once, disk-cached)
+    key = ("solve_batch", mdl, loss, opts["solver"], opts["rtol"], opts["atol"], opts["max_steps"], 1)
+    solve, _ = compiled(key, lambda: _batch._solve_batched(*key[1:]), v0, data, lo, hi, free)
     v, value, code, steps = (np.asarray(a) for a in jax.block_until_ready(solve(v0, data, lo, hi, free))[:4])
     return [(space.canonical(space.clip(v[i])), float(value[i]), int(code[i]) == 0, int(steps[i])) for i in range(len(ms))]
-
-
-@functools.lru_cache(maxsize=None)
-def _solve_at(mdl, loss, solver, rtol, atol, max_steps):
-    import jax
-
-    from ..fitting import batch as _batch
-
-    return jax.jit(_batch._solve_batched(mdl, loss, solver, rtol, atol, max_steps, 1))
 
 
 def _save_tile(folder: Path, t: int, arrays: dict) -> None:
