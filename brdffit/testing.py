@@ -71,7 +71,10 @@ def model_problems(model: str | Model, dtype="float64", param_sets=None, pairs=N
 
     Checks, per parameter set: values finite and >= 0, in ``dtype`` (no promotion of float32);
     the Jacobian with respect to the parameters and the gradients with respect to wi and wo
-    finite. One jit compilation: the parameter sets are vmapped. Returns [] when all is well.
+    finite; and the structure the solver relies on (``brdffit.fitting.structure``): channel c of
+    f_r depends on channel c of a 3-channel parameter only, and f_r is affine in the parameters
+    declared ``linear``. One jit compilation: the parameter sets are vmapped. Returns [] when all
+    is well.
     """
     model = get(model) if isinstance(model, str) else model
     dtype = jnp.dtype(dtype)
@@ -103,7 +106,45 @@ def model_problems(model: str | Model, dtype="float64", param_sets=None, pairs=N
             badg = ~np.isfinite(np.asarray(g).reshape(len(wi_np), -1)).all(axis=1)
             if badg.any():
                 problems.append(f"{model.name} [{label}] {what} not finite at wi={wi_np[badg][0]}, wo={wo_np[badg][0]}")
+    problems += _structure_problems(model, np.asarray(flat[0], np.float64), wi_np, wo_np)
     return problems
+
+
+def _structure_problems(model: Model, x: np.ndarray, wi, wo) -> list[str]:
+    """Channel-by-channel dependence and linearity of the declared linear parameters, at x (float64)."""
+    wi, wo = jnp.asarray(wi, jnp.float64), jnp.asarray(wo, jnp.float64)
+    keep = (np.asarray(wi)[:, 2] > 1e-3) & (np.asarray(wo)[:, 2] > 1e-3)  # away from the horizon
+    wi, wo = wi[keep], wo[keep]
+    x = jnp.asarray(x)
+
+    def f(v):
+        return model.eval(model.unflatten(v), wi, wo)
+
+    jac = np.asarray(jax.jacfwd(f)(x))  # (N, C, P)
+    out, i, C = [], 0, model.channels
+    lin = np.zeros(model.n_free, bool)
+    for p in model.params:
+        n = model.size(p)
+        if n > 1:
+            for c in range(n):
+                other = np.delete(jac[:, :, i + c], c, axis=1)
+                if np.any(other != 0):
+                    out.append(f"{model.name}: channel {c} of {p.name} changes another channel of f_r "
+                               "(formulas must work channel by channel)")
+                    break
+        lin[i : i + n] = p.linear
+        i += n
+    if lin.any():
+        # Affine in the linear parameters: f(x) = f(x with them 0) + sum_j x_j df/dx_j.
+        x0 = jnp.where(jnp.asarray(lin), 0.0, x)
+        pred = np.asarray(f(x0)) + np.einsum("ncp,p->nc", jac[:, :, lin], np.asarray(x)[lin])
+        val = np.asarray(f(x))
+        if not (np.all(np.isfinite(val)) and np.all(np.isfinite(pred))):
+            return out  # non-finite values are reported above
+        if not np.allclose(pred, val, rtol=1e-9, atol=1e-12 * max(np.abs(val).max(), 1e-300)):
+            out.append(f"{model.name}: f_r is not affine in the parameters declared linear "
+                       f"({', '.join(p.name for p in model.params if p.linear)})")
+    return out
 
 
 def assert_model_well_behaved(model: str | Model, dtype="float64", **options) -> None:

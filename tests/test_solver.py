@@ -17,7 +17,8 @@ from brdffit import models
 from brdffit.fitting import fit, init
 from brdffit.fitting.cache import cache_dir
 from brdffit.fitting.problem import prepare, resolve_model
-from brdffit.fitting.solve import BoundedLevenbergMarquardt, from_box, make_solver, solve_optx, to_box
+from brdffit.fitting.program import run_fit, subset_rows
+from brdffit.fitting.solve import BoundedLevenbergMarquardt, from_box, make_solver, to_box
 from brdffit.grid import spherical_to_cartesian
 from conftest import REPO
 
@@ -39,10 +40,11 @@ def _measurement(params=TRUTH, n=500, seed=0, scale=1.0, noise=0.01):
 def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
     prep = prepare(meas)
     mdl = resolve_model("ggx", 3)
-    v, value, code, steps, _, _, _ = solve_optx(
-        mdl, loss, solver, np.asarray(start)[None, :], prep.data, np.asarray(lo, float), np.asarray(hi, float),
-        np.asarray(free, bool), rtol=1e-9, atol=0.0, max_steps=200)
-    return v, value, code, steps
+    start = np.asarray(start, float)
+    args = (np.zeros((0, 0)), start[None, :], prep.data, np.asarray(lo, float), np.asarray(hi, float),
+            np.asarray(free, bool), start, subset_rows(meas.n_samples))
+    out, _, _ = run_fit(mdl, loss, solver, 1e-9, 0.0, 200, 1, args, grid=False)
+    return out["v"], float(out["loss"]), int(out["code"]), int(out["steps"])
 
 
 START = np.asarray([0.2, 0.2, 0.2, 0.5, 0.5, 0.5, 0.3, 0.05])

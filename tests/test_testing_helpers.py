@@ -57,3 +57,21 @@ def test_model_checker_reports_negative_and_non_finite_values():
     assert problems and "negative" in problems[0] and "kd=-0.5" in problems[0]
     problems = model_problems("lambert", param_sets=[{"kd": float("nan")}])
     assert problems and "non-finite" in problems[0]
+
+
+def test_model_problems_flags_a_formula_that_mixes_channels_or_a_false_linear_declaration():
+    import jax.numpy as jnp
+
+    from brdffit.models.base import Model, Param
+    from brdffit.testing import model_problems
+
+    kd = Param("kd", 3, 0.0, 1.0, 0.5, "albedo", linear=True)
+    ks = Param("ks", 3, 0.0, 1.0, 0.5, "albedo", linear=True)
+    good = Model("good", (kd, ks), lambda p, wi, wo: p["kd"] / jnp.pi + p["ks"] * wo[:, 2:3], citation="test")
+    mixes = Model("mixes", (kd,), lambda p, wi, wo: jnp.broadcast_to(jnp.mean(p["kd"]) / jnp.pi, (wi.shape[0], 3)),
+                  citation="test")
+    squared = Model("squared", (kd, ks), lambda p, wi, wo: p["kd"] / jnp.pi + p["ks"] ** 2 * wo[:, 2:3],
+                    citation="test")
+    assert model_problems(good) == []
+    assert any("channel by channel" in s for s in model_problems(mixes))
+    assert any("not affine" in s for s in model_problems(squared))

@@ -16,26 +16,16 @@ from . import init as _init
 from .losses import check_loss
 from .problem import Data, flat_residual, loss_values, prepare, resolve_model
 from .result import FitResult
+from .program import program_args, run_fit
 from .space import ParameterSpace, fit_warnings, sample_spacing
 from .solve import compiled
-from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_optx, solve_scipy
+from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_scipy
+from .structure import gauss_newton_matrix
 
 from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # noqa: E402
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
-
-
-@functools.lru_cache(maxsize=None)
-def normal_matrix_fn(model: Model, loss: str):
-    """(v, data) -> J^T J of the residual at v (what the standard errors need of J)."""
-    jac = jax.jacfwd(flat_residual(model, loss))
-
-    def fn(v, data):
-        J = jac(v, data)
-        return J.T @ J
-
-    return fn
 
 
 def standard_errors(model: Model, loss: str, params, data: Data | None, loss_value: float, n_residuals: int,
@@ -48,9 +38,10 @@ def standard_errors(model: Model, loss: str, params, data: Data | None, loss_val
     determine, e.g. ks and alpha of a lobe narrower than the sample spacing (only ks/alpha^2 is
     seen), or Lafortune's rho and |C| (only rho |C|^n is seen).
     """
-    v = np.asarray(model.flatten(params))
+    v = np.concatenate([np.broadcast_to(np.asarray(params[p.name], np.float64).reshape(-1), (model.size(p),))
+                        for p in model.params])
     if jtj is None:
-        jtj = np.asarray(jax.jit(normal_matrix_fn(model, loss))(jnp.asarray(v), data))
+        jtj = np.asarray(jax.jit(gauss_newton_matrix(model, loss))(jnp.asarray(v), data))
     if lo is None or hi is None:
         lo, hi = model.bounds()
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
@@ -94,7 +85,7 @@ def _start_from(init, model: Model, lo, hi) -> np.ndarray:
     if isinstance(init, str):
         if init != "defaults":
             raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {init!r}")
-        init = model.defaults()
+        return np.clip(model.default_vector(), lo, hi)
     if not isinstance(init, Mapping):
         raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {type(init).__name__}")
     full = dict(model.defaults())
@@ -196,19 +187,14 @@ def fit(
         n_starts = 1 if multistart is None else n_starts
 
     compile_s = run_s = init_s = 0.0
-    if init is None:
-        note("initialising: grid of starts")
-        starts, _, c_s, r_s = _init.best_starts(m, loss, data, lo, hi, free, anchor, k=n_starts, note=note)
-        compile_s += c_s
-        run_s += r_s
-        init_s = c_s + r_s
-    else:
-        starts = anchor[None, :]
-    # Keep the compiled shape (K starts) independent of how many distinct grid points there were.
-    starts = np.concatenate([starts, np.repeat(starts[-1:], n_starts - len(starts), axis=0)])[:n_starts]
-
-    note(f"solving: {solver}, {len(starts)} start{'s' if len(starts) > 1 else ''}")
+    note("initialising: grid of starts" if init is None else "initialising: the given start")
+    note(f"solving: {solver}, {n_starts} start{'s' if n_starts > 1 else ''}")
     if solver == "scipy":
+        if init is None:
+            starts, _, c_s, r_s = _init.best_starts(m, loss, data, lo, hi, free, anchor, k=n_starts, note=note)
+            compile_s, run_s, init_s = c_s, r_s, c_s + r_s
+        else:
+            starts = anchor[None, :]
         best = None
         for i, v0 in enumerate(starts):
             v, value, code, steps, c_s, r_s = solve_scipy(
@@ -219,33 +205,38 @@ def fit(
             if best is None or value < best[1]:
                 best = (v, value, code, steps, i)
         v, value, code, steps, i_best = best
+        v0, metrics, jtj, n_given = starts[i_best], None, None, len(starts)
     else:
-        v, value, code, steps, i_best, c_s, r_s = solve_optx(
-            m, loss, solver, starts, data, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps, note=note
-        )
-        compile_s += c_s
-        run_s += r_s
-    v0 = starts[i_best]
+        # One compiled program: grid start (unless init is given), solve, metrics, J^T J.
+        grid = init is None
+        args = program_args(m, space, data, anchor[None, :] if not grid else np.zeros((0, m.n_free)), grid=grid)
+        n_given = min(n_starts, len(args[0]) if grid else 1)
+        out, compile_s, run_s = run_fit(m, loss, solver, rtol, atol, max_steps, n_given, args, grid=grid, note=note)
+        v, value, code, steps, v0 = out["v"], float(out["loss"]), int(out["code"]), int(out["steps"]), out["start"]
+        metrics, jtj = {k: float(x) for k, x in out["metrics"].items()}, out["jtj"]
     note(f"solved: {steps} steps, loss {value:.6g}, {STATUS_TEXT[code]}")
-    # Fixed entries exactly at their values; lobes of one kind narrowest first.
-    v = space.canonical(space.clip(v))
+    # Fixed entries exactly at their values; lobes of one kind narrowest first (J^T J follows).
+    perm = space.canonical_order(space.clip(v))
+    v = space.clip(v)[perm]
+    jtj = None if jtj is None else np.asarray(jtj)[np.ix_(perm, perm)]
     return _result(space, loss, solver, measurement, prep, v, value, code, steps, v0,
                    seconds={"compile": compile_s, "run": run_s, "init": init_s},
+                   metrics=metrics, jtj=jtj,
                    options={"max_steps": max_steps, "rtol": rtol, "atol": atol,
                             "multistart": None if multistart is None else int(multistart),
-                            "starts": int(len(starts)), "init": "grid" if init is None else "given",
+                            "starts": int(n_given), "init": "grid" if init is None else "given",
                             **space_options(bounds, fixed, physical)})
 
 
 def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep, v, value, code, steps, v0, *,
             seconds, options, metrics=None, jtj=None) -> FitResult:
     m, lo, hi, free, name = space.model, space.lo, space.hi, space.free, measurement.name
-    params = {k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v)).items()}
+    params = {k: a.copy() for k, a in m.unflatten(np.asarray(v, dtype=np.float64)).items()}
     if metrics is None or jtj is None:
         # Through the disk cache, like the solve (a second process traces nothing).
         args = (jnp.asarray(v, dtype=jnp.float64), prep.data)
         metrics_fn, _ = compiled(("metrics", m), lambda: loss_values(m), *args)
-        jtj_fn, _ = compiled(("jtj", m, loss), lambda: normal_matrix_fn(m, loss), *args)
+        jtj_fn, _ = compiled(("jtj", m, loss), lambda: gauss_newton_matrix(m, loss), *args)
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
@@ -271,7 +262,7 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
         n_excluded=prep.n_excluded,
         excluded=prep.excluded,
         stderr=stderr,
-        start={k: np.asarray(a) for k, a in m.unflatten(jnp.asarray(v0)).items()},
+        start={k: a.copy() for k, a in m.unflatten(np.asarray(v0, dtype=np.float64)).items()},
         options=options,
         at_bound=at_bound,
         warnings=tuple(warnings),

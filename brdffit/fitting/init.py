@@ -37,6 +37,7 @@ import numpy as np
 from ..models.base import Model, Param
 from . import losses as L
 from .problem import Data
+from .structure import basis_fn, separable
 
 POINTS_ROUGHNESS = 10
 #: Roughness values shared by repeated lobes (their strictly increasing pairs: 45 for 10 values; 8 values missed the best basin of vch_golden_yellow).
@@ -165,18 +166,28 @@ def vp_grid(model: Model, loss: str):
             v = v.at[el_flat].set(x)
         return v
 
+    basis = basis_fn(model) if separable(model) else None
+
     def one(point, data: Data, lo, hi, free, anchor):
         wi, wo, ref, sqrt_w, cos_i, floor = data
         zero = jnp.zeros((len(el_flat),), dtype=ref.dtype)
-        f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
+        if basis is not None:
+            # One evaluation gives f_0 and every linear parameter's column (structure.basis_fn).
+            F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)
+            f0 = jnp.broadcast_to(F[:, -1:], ref.shape)
+            columns = [F[:, i : i + 1] - F[:, -1:] for i in range(len(lin))]
+        else:
+            f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
+            columns = []
+            for i, p in enumerate(lin):
+                ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
+                ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
+                columns.append(model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0)
         if not lin:
             x, f = zero, f0
         else:
             cols = []
-            for i, p in enumerate(lin):
-                ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
-                ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
-                g = model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0
+            for i, g in enumerate(columns):
                 for e in elements:
                     if e[0] == i:
                         cols.append(g if e[1] < 0 else g * (jnp.arange(C) == e[1]))
@@ -201,6 +212,7 @@ def vp_grid(model: Model, loss: str):
     return run
 
 
+@functools.lru_cache(maxsize=16)
 def _subset_index(n: int) -> np.ndarray | None:
     if n <= GRID_SAMPLES:
         return None

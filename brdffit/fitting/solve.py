@@ -87,9 +87,9 @@ class _LMState(eqx.Module):
 
 
 def _normal_equations(fn, y, args):
-    """Loss r.r, gradient J^T r and Gauss-Newton matrix J^T J at y, with the Jacobian by forward
-    mode (measured: jacfwd with the residual as aux is 3x faster than jax.linearize + a vmap of
-    its JVPs on ggx/UBO-81)."""
+    """Loss r.r, gradient J^T r and Gauss-Newton matrix J^T J at y for any residual ``fn``, with
+    the Jacobian by forward mode (the generic route; a fit passes the structured
+    ``structure.normal_equations`` of its model instead)."""
     def f(u):
         r = fn(u, args)[0]
         return r, r
@@ -127,9 +127,17 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     rtol: float
     atol: float = 0.0
     norm: Callable = optx.max_norm
+    #: (y, args) -> (r.r, J^T r, J^T J) of the residual; None: forward mode over every entry of y.
+    #: ``structure.normal_equations`` gives a model's exact, cheaper form.
+    normal_equations: Callable | None = eqx.field(static=True, default=None)
+
+    def _normal(self, fn, y, args):
+        if self.normal_equations is None:
+            return _normal_equations(fn, y, args)
+        return self.normal_equations(y, args)
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        c, g, H = _normal_equations(fn, y, args)
+        c, g, H = self._normal(fn, y, args)
         dtype = y.dtype
         return _LMState(c=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
                         done=jnp.asarray(False), result=optx.RESULTS.successful)
@@ -165,7 +173,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # The trial point's loss and normal equations together (one fused evaluation; a rejected
         # trial wastes the Jacobian, but near convergence nearly every trial is accepted, and
         # under vmap a branch would evaluate both sides anyway).
-        c_new, g_new, H_new = _normal_equations(fn, y_new, args)
+        c_new, g_new, H_new = self._normal(fn, y_new, args)
         pred = -(2.0 * gf @ step + step @ (H @ step))
         rho = (c - c_new) / jnp.maximum(pred, jnp.finfo(y.dtype).tiny)
         accept = jnp.isfinite(c_new) & (c_new < c) & jnp.all(jnp.isfinite(H_new))
@@ -194,7 +202,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return state.done, state.result
 
     def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
-        return y, aux, {"loss": state.c}
+        return y, aux, {"loss": state.c, "jtj": state.H}
 
 
 # -- optimistix's stock solvers on an unconstrained variable ------------------------------------
@@ -228,10 +236,10 @@ def from_box(v, lo, hi):
     return jnp.where(log, jnp.log(jnp.where(log, v, 1.0)), v)
 
 
-def make_solver(name: str, rtol: float, atol: float):
+def make_solver(name: str, rtol: float, atol: float, normal_equations: Callable | None = None):
     """The optimistix solver object behind a solver name (not ``scipy``)."""
     if name == "lm":
-        return BoundedLevenbergMarquardt(rtol=rtol, atol=atol)
+        return BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=normal_equations)
     # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
     # for rank-deficient systems (SVD).
     if name == "optx_lm":
@@ -250,11 +258,14 @@ COLUMN_NORM = 30.0
 
 
 def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free) -> (v, loss, code, steps).
+    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free) -> (v, loss, code, steps,
+    J^T J at v).
 
     The result is never NaN: when the final iterate is non-finite or worse than the start, the
     start (finite, in the box) is returned with a failure status.
     """
+    from .structure import gauss_newton_matrix, normal_equations
+
     fn = flat_residual(model, loss)
 
     def loss_floor(data):
@@ -263,21 +274,9 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor)
         return 1e-26 * jnp.sum(r0 * r0)
 
-    def loss_of(v, data):
-        r = fn(v, data)
-        return r @ r
-
-    def finish(v0, v, code, steps, data):
-        l0 = loss_of(v0, data)
-        l1 = loss_of(v, data)
-        # Worse than the start (beyond roundoff): a stock solver wandered off.
-        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
-        code = jnp.where(ok | (code != 0), code, 2)
-        code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
-        return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), code, steps
-
-    solver = make_solver(solver_name, rtol, atol)
     if solver_name == "lm":
+        ne = normal_equations(model, loss)
+        solver = make_solver("lm", rtol, atol, normal_equations=ne)
 
         def run(v0, data, lo, hi, free):
             v0 = jnp.clip(v0, lo, hi)
@@ -285,9 +284,18 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
                                      options={"lower": lo, "upper": hi, "free": free,
                                               "loss_floor": loss_floor(data)},
                                      max_steps=max_steps, throw=False)
-            return finish(v0, sol.value, _status_code(sol.result), sol.stats["num_steps"], data)
+            # The iterate moves only to accepted points (finite, lower loss), so the final state's
+            # loss and J^T J are those of sol.value: nothing to evaluate again.
+            return sol.value, sol.stats["loss"], _status_code(sol.result), sol.stats["num_steps"], sol.stats["jtj"]
 
         return run
+
+    solver = make_solver(solver_name, rtol, atol)
+    jtj = gauss_newton_matrix(model, loss)
+
+    def loss_of(v, data):
+        r = fn(v, data)
+        return r @ r
 
     def run(v0, data, lo, hi, free):
         """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
@@ -311,23 +319,30 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         sol = optx.least_squares(lambda z, d: fn_x(z / scale, d), solver, x0 * scale, args=data,
                                  max_steps=max_steps, throw=False)
         v = to_box(jnp.where(free, sol.value / scale, x0), lo, hi)
-        return finish(v0, v, _status_code(sol.result), sol.stats["num_steps"], data)
+        code = _status_code(sol.result)
+        l0, l1 = loss_of(v0, data), loss_of(v, data)
+        # Worse than the start (beyond roundoff): a stock solver wandered off.
+        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
+        code = jnp.where(ok | (code != 0), code, 2)
+        code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
+        v = jnp.where(ok, v, v0)
+        return v, jnp.where(ok, l1, l0), code, sol.stats["num_steps"], jtj(v, data)
 
     return run
 
 
 def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
     """run(starts (K, P), data, lo, hi, free) -> the best of K solves (one vmapped solve):
-    (v, loss, code, steps, index of the start, per-start losses (K,), per-start codes (K,)).
+    (v, loss, code, steps, index of the start, J^T J at v).
 
     The best is the lowest loss; the fit is converged when that solve's own test passed."""
     one = jax.vmap(solve_one(model, loss, solver_name, rtol, atol, max_steps), in_axes=(0, None, None, None, None))
 
     def run(starts, data, lo, hi, free):
-        v, value, code, steps = one(starts, data, lo, hi, free)
+        v, value, code, steps, jtj = one(starts, data, lo, hi, free)
         key = jnp.where(jnp.isfinite(value), value, jnp.inf)
         i = jnp.argmin(key)
-        return v[i], value[i], code[i], steps[i], i, value, code
+        return v[i], value[i], code[i], steps[i], i, jtj[i]
 
     return run
 
@@ -356,19 +371,6 @@ def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str],
     dt = time.perf_counter() - t0
     _CACHE[full] = fn
     return fn, dt
-
-
-def solve_optx(model, loss, solver_name, starts, data, lo, hi, free, *, rtol, atol, max_steps, note=None):
-    """Best of the K starts (K, P). Returns (v, loss, code, steps, start index, compile s, run s)."""
-    args = (jnp.asarray(starts), data, jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool))
-    fn, compile_s = compiled(("solve", model, loss, solver_name, rtol, atol, max_steps),
-                             lambda: solve_starts(model, loss, solver_name, rtol, atol, max_steps), *args,
-                             note=note)
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    run_s = time.perf_counter() - t0
-    v, value, code, steps, i = (np.asarray(a) for a in out[:5])
-    return v, float(value), int(code), int(steps), int(i), compile_s, run_s
 
 
 def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str = "exact"):

@@ -163,22 +163,30 @@ class ParameterSpace:
     def canonical(self, v) -> np.ndarray:
         """``v`` with the lobes of every interchangeable group sorted narrowest first (whole lobes
         swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
-        v = np.asarray(v, dtype=np.float64).copy()
+        v = np.asarray(v, dtype=np.float64)
+        return v[self.canonical_order(v)]
+
+    def canonical_order(self, v) -> np.ndarray:
+        """The permutation of flat entries that :meth:`canonical` applies: ``canonical(v) ==
+        v[perm]`` (and J^T J of the canonical vector is ``H[perm][:, perm]``)."""
+        v = np.asarray(v, dtype=np.float64)
+        perm = np.arange(v.shape[0])
         if not self.order:
-            return v
+            return perm
         slices = dict(_slices(self.model))
         params = {name: v[s] for name, s in slices.items()}
+        source_perm = perm.copy()
         for group in self.order:
-            blocks = [np.concatenate([params[q] for q in lobe.params]) for lobe in group]
+            blocks = [np.concatenate([source_perm[slices[q]] for q in lobe.params]) for lobe in group]
             widths = [lobe_width(self.model, lobe, params) for lobe in group]
             ranked = sorted(range(len(group)), key=lambda i: widths[i])
             for target, source in zip(group, ranked):
                 i = 0
                 for q in target.params:
                     n = slices[q].stop - slices[q].start
-                    v[slices[q]] = blocks[source][i : i + n]
+                    perm[slices[q]] = blocks[source][i : i + n]
                     i += n
-        return v
+        return perm
 
     def at_bound(self, v) -> dict[str, str]:
         """Free parameters of ``v`` on a finite bound of this space: name -> "lower", "upper", or

@@ -171,7 +171,11 @@ class Model:
     ``formula(params, wi, wo)`` gets a params dict (arrays of shape (size,)) and unit directions
     (N, 3) in the local frame, and returns f_r (N, channels) in 1/sr, without the cosine. It must
     be finite, with finite gradients, for every parameter in bounds and every direction in the
-    closed upper hemisphere (use the double-``where`` pattern for branches).
+    closed upper hemisphere (use the double-``where`` pattern for branches). Channel c of the
+    result may depend on channel c of a 3-channel parameter only (formulas written with
+    broadcasting do), and f_r must be affine in the parameters declared ``linear``: the solver
+    computes its Jacobians with that structure (``brdffit.fitting.structure``), and
+    ``brdffit.testing.model_problems`` checks both.
     """
 
     name: str
@@ -234,6 +238,10 @@ class Model:
     def defaults(self, dtype=None) -> dict[str, Array]:
         dtype = dtype or jnp.result_type(float)
         return {p.name: jnp.full((self.size(p),), p.default, dtype=dtype) for p in self.params}
+
+    def default_vector(self) -> np.ndarray:
+        """The defaults as a flat float64 NumPy vector (``flatten(defaults())`` without JAX)."""
+        return np.concatenate([np.full(self.size(p), p.default, dtype=np.float64) for p in self.params])
 
     def check_params(self, params: Params) -> dict[str, Array]:
         """Params as arrays of the declared sizes; raises ValueError naming what is wrong."""

@@ -1,0 +1,95 @@
+"""One compiled program per fit: start, solve, metrics (SPEC 5).
+
+``fit``, ``fit_batch`` and ``fit_btf`` all run :func:`fit_program`: the variable-projection grid
+on a subset of the samples (``init``), the best ``k`` candidates (grid points and any starts the
+caller gives, ranked by their loss on that subset) solved at once (``solve.solve_starts``), then
+every loss and metric and J^T J at the solution (the standard errors' need; the default solver
+returns it from its last step). One dispatch per fit: a warm ggx fit spends its time in the
+solve, not in Python between compiled pieces.
+
+``fit_batch`` maps the same program over a batch (``jax.lax.map``: a vmapped solve would run
+every lane until the slowest converges).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..models.base import Model
+from . import init as _init
+from .problem import Data, flat_residual, loss_values
+from .solve import compiled, solve_starts
+
+
+@functools.lru_cache(maxsize=None)
+def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, k: int,
+                grid: bool = True):
+    """run(grid (G, m), given (E, P), data, lo, hi, free, anchor, subset (S,) int) -> dict with
+    ``v``, ``loss``, ``code``, ``steps``, ``start`` (the start the best solve came from),
+    ``metrics`` (dict), ``jtj`` (P, P).
+
+    Candidates: the G grid points (linear parameters solved at each) when ``grid``, and the E
+    ``given`` starts; the k with the lowest loss on the ``subset`` rows start the solver
+    (G + E >= k)."""
+    vp = _init.vp_grid(model, loss)
+    residual = flat_residual(model, loss)
+    solve = solve_starts(model, loss, solver, rtol, atol, max_steps)
+    metrics = loss_values(model)
+
+    def run(grid_points, given, data: Data, lo, hi, free, anchor, subset):
+        n = data[0].shape[0]
+        sub = Data(*(a[subset] if a.ndim and a.shape[0] == n else a for a in data))
+        given = jnp.where(free, jnp.clip(given, lo, hi), anchor)
+
+        def subset_loss(v):
+            r = residual(v, sub)
+            value = r @ r
+            return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+        flats, values = [given], [jax.vmap(subset_loss)(given)]
+        if grid:
+            g_flats, g_values = vp(grid_points, sub, lo, hi, free, anchor)
+            flats.insert(0, g_flats)
+            values.insert(0, g_values)
+        flats, values = jnp.concatenate(flats), jnp.concatenate(values)
+        # Stable: among equal losses the grid (listed first) wins.
+        starts = flats[jnp.argsort(values, stable=True)[:k]]
+        v, value, code, steps, i, jtj = solve(starts, data, lo, hi, free)
+        return {"v": v, "loss": value, "code": code, "steps": steps, "start": starts[i],
+                "metrics": metrics(v, data), "jtj": jtj}
+
+    return run
+
+
+def subset_rows(n: int) -> np.ndarray:
+    """Rows the grid scores (``init.GRID_SAMPLES`` of them, or all)."""
+    idx = _init._subset_index(n)
+    return np.arange(n) if idx is None else idx
+
+
+def program_args(model: Model, space, data: Data, given: np.ndarray, grid: bool = True):
+    """The arguments of :func:`fit_program` for one fit in ``space`` (a ``ParameterSpace``)."""
+    lo, hi, free = space.lo, space.hi, space.free
+    anchor = space.clip(model.default_vector())
+    pts = _init.grid_for(model, lo, hi, free, anchor) if grid else np.zeros((0, 0))
+    return (pts, np.asarray(given, np.float64).reshape(-1, model.n_free), data, lo, hi, free, anchor,
+            subset_rows(data[0].shape[-2]))
+
+
+def run_fit(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, k: int, args,
+            grid: bool = True, note=None):
+    """Compile (once per process, and through the disk cache once per machine) and run one fit's
+    program. Returns (outputs as NumPy, compile seconds, run seconds)."""
+    # NumPy arguments go straight to the compiled call (no eager device_put per array).
+    args = args[:5] + (np.asarray(args[5], dtype=bool),) + args[6:]
+    fn, compile_s = compiled(("fit", model, loss, solver, rtol, atol, max_steps, k, grid),
+                             lambda: fit_program(model, loss, solver, rtol, atol, max_steps, k, grid), *args, note=note)
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    run_s = time.perf_counter() - t0
+    return jax.tree_util.tree_map(np.asarray, out), compile_s, run_s

@@ -1,0 +1,170 @@
+"""The normal equations of one solver step, computed with the structure every BRDF model shares.
+
+A step of a least-squares solver needs the loss r.r, the gradient J^T r and the Gauss-Newton
+matrix J^T J of the residual r (N samples x C channels, flattened) with respect to the flat
+parameter vector v (P entries). The dense way, ``jax.jacfwd`` over all P entries, pushes P
+tangents through the whole model and the loss. Two facts of every model make it cheaper; both are
+part of the model contract (``brdffit.models.base``) and tested for every model of the library
+(``tests/test_structure.py``):
+
+1. **Channel by channel.** Channel c of f_r depends on channel c of a 3-channel parameter only
+   (formulas are written with broadcasting). So the Jacobian columns of kd_r, kd_g, kd_b touch
+   disjoint rows, and one forward-mode tangent per *parameter* (all its channels at once) gives
+   all of them (Curtis-Powell-Reid column compression): K tangents instead of P (ggx: 4 for 8,
+   lambert+ggx+ggx: 7 for 13). J^T J is then assembled from per-channel K x K blocks.
+
+2. **Linear parameters** (``Param(linear=True)``: kd, ks, rho...): f = B_0(theta) +
+   sum_j lambda_j B_j(theta), with theta the other parameters. When every other parameter is one
+   value shared by the channels (all models but ``ashikhmin_shirley``, whose rs is per channel),
+   the B_j do not depend on the channel: one evaluation of the formula with the linear
+   parameters set to unit vectors (the "channel" axis carrying the basis index) gives every B_j
+   on N samples, and forward mode over theta alone (its few tangents) gives their partials. The
+   lobe (D, G, F, the half vectors) is computed once per sample, not once per channel and
+   tangent. Measured on ggx/UBO-81 (``benchmarks/bench_fit.py`` prints the step time).
+
+The loss enters through g'(f) (every loss is elementwise in f): J = diag(dr/df) df/dv.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..models.base import Model
+from . import losses as L
+from .problem import Data, flat_residual
+
+
+def compression(model: Model) -> np.ndarray:
+    """S (C, K, P): S[c, k, p] = 1 when flat entry p is parameter k's value for channel c (or its
+    only value, for a parameter shared by the channels)."""
+    C, P = model.channels, model.n_free
+    S = np.zeros((C, len(model.params), P))
+    i = 0
+    for k, p in enumerate(model.params):
+        n = model.size(p)
+        for c in range(C):
+            S[c, k, i + (c if n > 1 else 0)] = 1.0
+        i += n
+    return S
+
+
+def separable(model: Model) -> bool:
+    """Whether fact 2 applies: some linear parameters, every other parameter a single value."""
+    return any(p.linear for p in model.params) and all(p.linear or model.size(p) == 1 for p in model.params)
+
+
+def _assemble(S: Float[Array, "C K P"], J3: Float[Array, "C K N"], r3: Float[Array, "C N"]):
+    """(r.r, g, H) from the compressed Jacobian J3 (C, K, N) and the residuals r3 (C, N)."""
+    G = jnp.matmul(J3, jnp.swapaxes(J3, 1, 2))  # (C, K, K): measured 3x faster than an einsum over n
+    gc = jnp.matmul(J3, r3[:, :, None])[..., 0]  # (C, K)
+    H = jnp.einsum("ckp,ckl,clq->pq", S, G, S)
+    g = jnp.einsum("ckp,ck->p", S, gc)
+    return jnp.sum(r3 * r3), g, H
+
+
+def _residual_and_slope(loss, f, data: Data):
+    """r (N, C) and dr/df (N, C): every loss is elementwise in f."""
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    return jax.jvp(lambda f: L.residual(loss, f, ref, cos_i, sqrt_w, floor), (f,), (jnp.ones_like(f),))
+
+
+def basis_fn(model: Model):
+    """For a :func:`separable` model: basis(theta (n_nl,), wi, wo) -> F (N, n_lin + 1), with
+    theta the non-linear parameters in declared order; column j = B_0 + B_j (linear parameter j,
+    in declared order), the last column B_0. One evaluation of the formula: the linear parameters
+    are unit vectors along the axis that otherwise carries the colour channels."""
+    lin = [p.name for p in model.params if p.linear]
+    nonlin = [p.name for p in model.params if not p.linear]
+    n_lin = len(lin)
+
+    def basis(theta, wi, wo):
+        unit = jnp.eye(n_lin + 1, dtype=wi.dtype)
+        p = {name: unit[j] for j, name in enumerate(lin)}
+        p.update({name: theta[i : i + 1] for i, name in enumerate(nonlin)})
+        return jnp.broadcast_to(model.formula(p, wi, wo), (wi.shape[0], n_lin + 1))
+
+    return basis
+
+
+@functools.lru_cache(maxsize=None)
+def normal_equations(model: Model, loss: str):
+    """(v (P,), data) -> (r.r, J^T r (P,), J^T J (P, P)), by the cheapest exact route for this
+    model (see the module docstring); equal to the dense computation to rounding."""
+    S = compression(model)
+    C = model.channels
+    if not separable(model):
+        residual = flat_residual(model, loss)
+        E = S.sum(axis=0).T > 0  # (P, K): flat entry p belongs to parameter k
+
+        def compressed(v, data):
+            Ej = jnp.asarray(E, dtype=v.dtype)
+
+            def r_of(u):
+                r = residual(v + Ej @ u, data)
+                return r, r
+
+            Jc, r = jax.jacfwd(r_of, has_aux=True)(jnp.zeros((len(model.params),), v.dtype))
+            n = r.shape[0] // C
+            J3 = jnp.transpose(Jc.reshape(n, C, -1), (1, 2, 0))
+            return _assemble(jnp.asarray(S, v.dtype), J3, r.reshape(n, C).T)
+
+        return compressed
+
+    lin = [k for k, p in enumerate(model.params) if p.linear]
+    nonlin = [k for k, p in enumerate(model.params) if not p.linear]
+    starts = np.cumsum([0] + [model.size(p) for p in model.params])
+    n_lin = len(lin)
+    basis = basis_fn(model)
+
+    def structured(v, data: Data):
+        wi, wo = data[0], data[1]
+        theta = jnp.stack([v[starts[k]] for k in nonlin]) if nonlin else jnp.zeros((0,), v.dtype)
+        lam = jnp.stack([jnp.broadcast_to(v[starts[k] : starts[k + 1]], (C,)) for k in lin])  # (n_lin, C)
+        if nonlin:
+            # (n_nl, N, n_lin + 1) partials: a vmap of JVPs, laid out for the products below.
+            F, dF = jax.vmap(lambda t: jax.jvp(lambda th: basis(th, wi, wo), (theta,), (t,)), out_axes=(None, 0))(
+                jnp.eye(len(nonlin), dtype=v.dtype))
+        else:
+            F, dF = basis(theta, wi, wo), None
+        B0, B = F[:, n_lin], F[:, :n_lin] - F[:, n_lin:]
+        f = B0[:, None] + B @ lam  # (N, C)
+        r, slope = _residual_and_slope(loss, f, data)
+        cols = [None] * len(model.params)
+        wT = slope.T  # (C, N)
+        for j, k in enumerate(lin):
+            cols[k] = wT * B[:, j][None, :]
+        if nonlin:
+            dB0, dB = dF[:, :, n_lin], dF[:, :, :n_lin] - dF[:, :, n_lin:]
+            df = dB0[:, None, :] + jnp.einsum("knj,jc->kcn", dB, lam)  # (n_nl, C, N)
+            for i, k in enumerate(nonlin):
+                cols[k] = wT * df[i]
+        J3 = jnp.stack(cols, axis=1)  # (C, K, N)
+        return _assemble(jnp.asarray(S, v.dtype), J3, r.T)
+
+    return structured
+
+
+def dense_normal_equations(model: Model, loss: str):
+    """The reference: jacfwd over all P entries (what the structured forms must equal)."""
+    residual = flat_residual(model, loss)
+
+    def fn(v, data):
+        J, r = jax.jacfwd(lambda u: (residual(u, data),) * 2, has_aux=True)(v)
+        return r @ r, J.T @ r, J.T @ J
+
+    return fn
+
+
+def gauss_newton_matrix(model: Model, loss: str):
+    """(v, data) -> J^T J alone (the standard errors' need)."""
+    ne = normal_equations(model, loss)
+    return lambda v, data: ne(v, data)[2]
+
+
+__all__ = ["normal_equations", "dense_normal_equations", "gauss_newton_matrix", "compression", "separable"]
+
