@@ -57,24 +57,23 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     calls = []
     real = btf_fit._fit_texels
 
-    def recorded(ms, mdl, loss, options, starts=None):
-        out = real(ms, mdl, loss, options, starts)
-        calls.append(([m.name for m in ms], None if starts is None else np.array(starts), out[0]))
+    def recorded(data, mdl, loss, options, starts=None):
+        out = real(data, mdl, loss, options, starts)
+        calls.append((None if starts is None else np.array(starts), out[0]))
         return out
 
     monkeypatch.setattr(btf_fit, "_fit_texels", recorded)
     with_nb = brdffit.fit_btf(btf, "ggx", progress=False)
-    assert [c[1] is None for c in calls] == [True, False, False]  # the grid for the first pass only
+    passes = btf_fit.neighbour_passes(6, 6)
+    assert [c[0] is None for c in calls] == [True, False, False]  # the grid for the first pass only
     # every later texel started from the result of its nearest earlier-fitted texel
     fitted = {}
-    for names, starts, v in calls:
+    for (texels, sources), (starts, v) in zip(passes, calls):
         if starts is not None:
-            for name, s in zip(names, starts):
-                r, c = (int(x) for x in name[name.index("[") + 1 : -1].split(","))
-                near = min(fitted, key=lambda k: ((k[0] - r) ** 2 + (k[1] - c) ** 2, k))
-                np.testing.assert_array_equal(s, fitted[near])
-        for name, x in zip(names, v):
-            fitted[tuple(int(y) for y in name[name.index("[") + 1 : -1].split(","))] = x
+            np.testing.assert_array_equal(starts, np.stack([fitted[int(s)] for s in sources]))
+        fitted.update(zip(texels.tolist(), v))
+    flat = np.concatenate([with_nb.params[p.name].reshape(36, -1) for p in btf_fit.resolve_model("ggx", 3).params], 1)
+    np.testing.assert_array_equal(flat, np.stack([fitted[i] for i in range(36)]))  # the maps hold those results
     monkeypatch.setattr(btf_fit, "_fit_texels", real)
     grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
     assert with_nb.converged.all() and grid_only.converged.all()
@@ -83,3 +82,11 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
         if k != "f0":  # not determined by one table next to ks (see generate.smooth_maps)
             np.testing.assert_allclose(with_nb.params[k], grid_only.params[k], rtol=1e-3, err_msg=k)
     assert with_nb.info["neighbours"] and not grid_only.info["neighbours"]
+
+
+def test_unknown_options_are_usage_errors(small_ggx):
+    btf = brdffit.load_btf(small_ggx, tile=6)
+    with pytest.raises(brdffit.UsageError, match="unknown option"):
+        brdffit.fit_btf(btf, "ggx", progress=False, sort=True)
+    with pytest.raises(brdffit.UsageError, match="not batched"):
+        brdffit.fit_btf(btf, "ggx", progress=False, solver="scipy")

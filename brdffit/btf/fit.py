@@ -50,7 +50,8 @@ from .maps import ParameterMaps
 from .reader import BTF
 
 RUN_FILE = "run.json"
-#: Texels per call of fit_batch (bounds its memory; see _fit_texels).
+#: Texels per compiled call (solve_batch's chunk, unless fit_btf is given ``chunk``): the passes
+#: over a 16 x 16 tile hold 16, 48 and 192 texels, so every call has one shape.
 GROUP = 16
 #: Lattice strides of the passes over a tile (see neighbour_passes): 1/16 of the texels start
 #: from the initialisation grid, the others from a fitted neighbour 1-2 texels away.
@@ -94,18 +95,21 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
 
     With ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse
     lattice of texels from the initialisation grid, every later one starts each texel from its
-    nearest fitted neighbour (see the module docstring for what that saves)."""
+    nearest fitted neighbour's result, without the grid (see the module docstring)."""
+    from ..fitting.problem import Data, prepare
+
     values = btf.tile_values(t)  # (h, w, 6561, C) float32
     h, w = values.shape[:2]
-    ms = [btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]")
-          for r in range(h) for c in range(w)]
-    n = len(ms)
+    preps = [prepare(btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]"))
+             for r in range(h) for c in range(w)]
+    data = Data(*(np.stack([np.asarray(p.data[i]) for p in preps]) for i in range(6)))
+    n = len(preps)
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
     passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]
     for texels, sources in passes:
         starts = None if sources[0] < 0 else flat[sources]
-        v, value, converged, steps = _fit_texels([ms[i] for i in texels], mdl, loss, batch_options, starts)
+        v, value, converged, steps = _fit_texels(Data(*(a[texels] for a in data)), mdl, loss, batch_options, starts)
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
     out = {k: a.reshape(h, w) for k, a in out.items()}
@@ -116,55 +120,24 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
     return out
 
 
-def _fit_texels(ms: list, mdl, loss: str, batch_options: dict, starts=None):
-    """fit_batch of these texels (from ``starts`` (n, P) when given): flat params (n, P), loss,
-    converged, steps."""
-    from ..fitting import fit_batch
-
-    # fit_batch in groups of GROUP texels: its initialisation grid holds every texel of a call at
-    # once (measured: 64 ggx texels per call, 6.6 GB peak; 256, killed). The last group is padded
-    # (repeating a texel), so that every call has one shape and compiles once.
-    n = len(ms)
-    group = min(GROUP, n)
-    pad = -n % group
-    ms = ms + ms[-1:] * pad
-    if starts is not None:
-        starts = np.concatenate([starts, np.repeat(starts[-1:], pad, axis=0)])
-    results = []
-    for s in range(0, len(ms), group):
-        if starts is None:
-            results += [(np.asarray(mdl.flatten(r.params)), r.loss_value, r.converged, r.steps)
-                        for r in fit_batch(ms[s : s + group], mdl, loss=loss, **batch_options)]
-        else:
-            results += _fit_batch_from(ms[s : s + group], mdl, loss, starts[s : s + group], batch_options)
-    results = results[:n]
-    return (np.stack([r[0] for r in results]), np.array([r[1] for r in results]),
-            np.array([r[2] for r in results], bool), np.array([r[3] for r in results], int))
+#: fit_btf's options that go to brdffit.fitting.batch.solve_batch as they are.
+_SOLVE_OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes")
 
 
-def _fit_batch_from(ms: list, mdl, loss: str, starts, batch_options: dict) -> list[tuple]:
-    """PROTOTYPE SHIM, to be replaced by ``fit_batch(..., starts=)`` when that lands: fit_batch's
-    solve from the given starts (clipped to the box), without the initialisation grid."""
-    import jax
-    import jax.numpy as jnp
+def _fit_texels(data, mdl, loss: str, batch_options: dict, starts=None):
+    """``fit_batch``'s array-level core (``solve_batch``: no FitResult per texel, fit_btf keeps
+    only these maps) on a batch of texels' data, from the grid, or from ``starts`` (n, P) alone.
+    Returns flat params (n, P), loss, converged, steps."""
+    from ..fitting.api import default_starts, parameter_space
+    from ..fitting.batch import solve_batch
 
-    from ..fitting import api
-    from ..fitting.problem import Data, prepare
-    from ..fitting import batch as _batch
-    from ..fitting.solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, compiled
-
-    opts = {"max_steps": DEFAULT_MAX_STEPS, "rtol": DEFAULT_RTOL, "atol": DEFAULT_ATOL, "solver": api.DEFAULT_SOLVER,
-            **batch_options}
-    space = api.parameter_space(mdl, opts.get("bounds"), opts.get("fixed"), opts.get("physical", False))
-    lo, hi, free = jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free)
-    preps = [prepare(m) for m in ms]
-    data = Data(*(jnp.stack([p.data[i] for p in preps]) for i in range(6)))
-    v0 = jnp.asarray(space.clip(np.asarray(starts)))[:, None, :]
-    # fit_batch's own compiled solve (same key and shapes: one program, compiled once, disk-cached)
-    key = ("solve_batch", mdl, loss, opts["solver"], opts["rtol"], opts["atol"], opts["max_steps"], 1)
-    solve, _ = compiled(key, lambda: _batch._solve_batched(*key[1:]), v0, data, lo, hi, free)
-    v, value, code, steps = (np.asarray(a) for a in jax.block_until_ready(solve(v0, data, lo, hi, free))[:4])
-    return [(space.canonical(space.clip(v[i])), float(value[i]), int(code[i]) == 0, int(steps[i])) for i in range(len(ms))]
+    space = parameter_space(mdl, batch_options.get("bounds"), batch_options.get("fixed"),
+                            batch_options.get("physical", False))
+    multistart = batch_options.get("multistart")
+    k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
+    options = {"chunk": GROUP, **{key: batch_options[key] for key in _SOLVE_OPTIONS if key in batch_options}}
+    res = solve_batch(space, loss, data, k=k, starts=starts, grid=starts is None, **options)
+    return res["v"], res["loss"], res["code"] == 0, res["steps"]
 
 
 def _save_tile(folder: Path, t: int, arrays: dict) -> None:
@@ -232,8 +205,9 @@ def fit_btf(
 ) -> ParameterMaps:
     """Fit ``model`` to every texel of ``btf``; see the module docstring.
 
-    ``solver`` and further keyword arguments (``max_steps``, ``rtol``, ``atol``, ``chunk`` ...) go
-    to ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
+    ``solver`` and further keyword arguments (``max_steps``, ``rtol``, ``atol``, ``chunk``,
+    ``lanes``, ``multistart``, ``bounds``, ``fixed``, ``physical``) mean what they mean for
+    ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
     the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
     ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
     splitting work by hand). ``neighbours``: start most texels from a fitted neighbour's result
@@ -242,6 +216,7 @@ def fit_btf(
     import jax
 
     from ..fitting.losses import check_loss
+    from ..fitting.solve import check_solver
 
     if not isinstance(btf, BTF):
         raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
@@ -249,6 +224,11 @@ def fit_btf(
     mdl = resolve_model(model, btf.channels)
     if solver is not None:
         batch_options["solver"] = solver
+    unknown = sorted(set(batch_options) - set(_SOLVE_OPTIONS) - {"bounds", "fixed", "physical", "multistart"})
+    if unknown:
+        raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
+    if "solver" in batch_options and check_solver(batch_options["solver"]) == "scipy":
+        raise UsageError("fit_btf: solver 'scipy' is not batched; choose a compiled solver")
     run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},
            "neighbours": bool(neighbours),
            "tile": btf.tile, "shape": [btf.height, btf.width]}
