@@ -90,3 +90,50 @@ def test_unknown_options_are_usage_errors(small_ggx):
         brdffit.fit_btf(btf, "ggx", progress=False, sort=True)
     with pytest.raises(brdffit.UsageError, match="not batched"):
         brdffit.fit_btf(btf, "ggx", progress=False, solver="scipy")
+
+
+def test_texels_not_converged_from_a_neighbour_are_fitted_again_from_the_grid(small_ggx, monkeypatch):
+    btf = brdffit.load_btf(small_ggx, tile=6)
+    calls = []
+    real = btf_fit._fit_texels
+
+    def failing(data, mdl, loss, options, starts=None):
+        v, value, converged, steps = real(data, mdl, loss, options, starts)
+        if starts is not None:  # as if every neighbour start had failed, at a higher loss
+            value, converged = value * 2, np.zeros_like(converged)
+        calls.append((starts is None, len(value)))
+        return v, value, converged, steps
+
+    monkeypatch.setattr(btf_fit, "_fit_texels", failing)
+    maps = brdffit.fit_btf(btf, "ggx", progress=False)
+    first = len(btf_fit.neighbour_passes(6, 6)[0][0])
+    assert calls[-1] == (True, 36 - first)  # every neighbour-started texel, once more from the grid
+    assert maps.converged.all()
+    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
+    np.testing.assert_array_equal(maps.loss, grid_only.loss)  # the grid's results were kept
+
+
+def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
+    btf = brdffit.load_btf(small_ggx, tile=6)
+    real = btf_fit._fit_texels
+    calls = []
+
+    def failing(data, mdl, loss, options, starts=None):
+        v, value, converged, steps = real(data, mdl, loss, options, starts)
+        calls.append(starts is None)
+        if starts is not None:  # neighbour starts: not converged, loss x2
+            value, converged = value * 2, np.zeros_like(converged)
+        elif len(calls) > 1:  # the refit from the grid: not converged either, loss x3
+            value, converged = value * 3, np.zeros_like(converged)
+        return v, value, converged, steps
+
+    monkeypatch.setattr(btf_fit, "_fit_texels", failing)
+    maps = brdffit.fit_btf(btf, "ggx", progress=False)
+    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
+    first = np.zeros(36, bool)
+    first[btf_fit.neighbour_passes(6, 6)[0][0]] = True
+    first = first.reshape(6, 6)
+    np.testing.assert_allclose(maps.loss[~first], 2 * grid_only.loss[~first], rtol=1e-6)  # the x2 kept, not the x3
+    assert not maps.converged[~first].any() and maps.converged[first].all()

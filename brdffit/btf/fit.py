@@ -95,7 +95,8 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
 
     With ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse
     lattice of texels from the initialisation grid, every later one starts each texel from its
-    nearest fitted neighbour's result, without the grid (see the module docstring)."""
+    nearest fitted neighbour's result, without the grid (see the module docstring); those that
+    do not converge so are fitted again from the grid."""
     from ..fitting.problem import Data, prepare
 
     values = btf.tile_values(t)  # (h, w, 6561, C) float32
@@ -112,6 +113,15 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
         v, value, converged, steps = _fit_texels(Data(*(a[texels] for a in data)), mdl, loss, batch_options, starts)
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
+    # A texel started from a neighbour that did not converge (a neighbour of another material, in
+    # a basin of its own) is fitted again from the grid; the lower loss is kept.
+    again = np.flatnonzero(~out["converged"] & ~np.isin(np.arange(n), passes[0][0]))
+    if len(again):
+        v, value, converged, steps = _fit_texels(Data(*(a[again] for a in data)), mdl, loss, batch_options)
+        better = (converged & ~out["converged"][again]) | (value < out["loss"][again])
+        keep = again[better]
+        flat[keep] = v[better]
+        out["loss"][keep], out["converged"][keep], out["steps"][keep] = value[better], converged[better], steps[better]
     out = {k: a.reshape(h, w) for k, a in out.items()}
     i = 0
     for p in mdl.params:
