@@ -2,8 +2,9 @@
 
 The work unit is a *tile* of the BTF's cache (16 x 16 texels by default, see
 :mod:`brdffit.btf.reader`): its texels are read with one sequential read and fitted together by
-``brdffit.fit_batch`` (batched, vmapped, spread over the process's JAX devices), so the fit
-becomes as fast as ``fit_batch`` is.
+``fit_batch``'s array-level core (``brdffit.fitting.batch.solve_batch``: the program of ``fit``
+mapped over the texels, spread over the process's JAX devices; no FitResult per texel, the maps
+need only the parameters, loss, status and steps).
 
 Resuming. With ``out=DIR``, every finished tile is written at once (atomically) to
 ``DIR/tiles/tile_NNNNN.npz``, beside ``DIR/tiles/run.json`` which identifies the run (the BTF's
@@ -25,12 +26,14 @@ Neighbouring texels' results as starts (``neighbours=True``, the default). Insid
 texels are fitted in passes over nested lattices (:func:`neighbour_passes`, strides 4, 2, 1):
 the first pass (1/16 of the texels) starts from the initialisation grid like ``fit``, every
 later texel starts from the result of its nearest texel fitted in an earlier pass (1 or 1.4
-texels away), without the grid. Measured (steps of the solve, mean over the texels, losses equal
-to the grid-started fits within 1e-7 relative): a 32 x 32 region of the benchmark's 64 x 64 ggx
-BTF, 4.06 -> 3.46; a 16 x 16 mosaic of the 4 RGL materials, 7.75 -> 1.42 (a region's texels hold
-one table: the neighbour's result is the answer); a 16 x 16 ggx BTF with maps that change fast
-from texel to texel, 4.27 -> 4.30 (the grid is still skipped for 15/16 of the texels). Within a
-tile only, so that tiles stay independent (resuming, several processes).
+texels away), without the grid; a texel that does not converge so is fitted again from the
+grid. The grid costs more than a solve here (measured, 64 x 64 ggx BTF: 20 ms per texel from the
+grid, 10 ms from a neighbour, 2 shared cores), and a neighbour's start also saves solver steps
+(mean over the texels, losses equal to the grid-started fits within 1e-7 relative): the
+benchmark's 64 x 64 ggx BTF, 4.26 -> 3.36; a 16 x 16 mosaic of the 4 RGL materials, 7.75 -> 1.42
+(a region's texels hold one table: the neighbour's result is the answer); a 16 x 16 ggx BTF with
+maps that change fast from texel to texel, 4.27 -> 4.30 (the grid still skipped for 15/16).
+Within a tile only, so that tiles stay independent (resuming, several processes).
 """
 
 from __future__ import annotations
