@@ -166,28 +166,45 @@ def vp_grid(model: Model, loss: str):
             v = v.at[el_flat].set(x)
         return v
 
-    basis = basis_fn(model) if separable(model) else None
+    # Separable models whose linear parameters are all per channel (every model of the library
+    # but ashikhmin_shirley): one formula evaluation per grid point gives f_0 and every column
+    # (structure.basis_fn), and the linear least squares splits into one small system per channel.
+    per_channel = separable(model) and all(model.size(p) == C for p in lin)
+    basis = basis_fn(model) if per_channel else None
+    lin_flat = np.asarray([[start[p.name] + c for p in lin] for c in range(C)], dtype=int)  # (C, L)
+
+    def one_per_channel(point, data: Data, lo, hi, free, anchor):
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)
+        b0, B = F[:, -1], F[:, :-1] - F[:, -1:]  # (N,), (N, L)
+        u = sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)  # (N, C)
+        gram = jnp.einsum("nc,nj,nk->cjk", u, B, B)
+        rhs = jnp.einsum("nc,nj->cj", u * (ref - b0[:, None]), B)
+        s = jnp.sqrt(jnp.maximum(jnp.diagonal(gram, axis1=1, axis2=2), jnp.finfo(ref.dtype).tiny))  # (C, L)
+        elo = jnp.where(free[lin_flat], lo[lin_flat], anchor[lin_flat])
+        ehi = jnp.where(free[lin_flat], hi[lin_flat], anchor[lin_flat])
+        x = jax.vmap(_box_lsq)(gram / s[:, :, None] / s[:, None, :], rhs / s, elo * s, ehi * s) / s
+        x = jnp.clip(x, elo, ehi)  # (C, L)
+        f = b0[:, None] + B @ x.T
+        r = L.residual(loss, f, ref, cos_i, sqrt_w, floor)
+        value = jnp.sum(r**2)
+        v = flat_of(point, jnp.zeros((len(el_flat),), dtype=ref.dtype)).at[lin_flat].set(x)
+        return v, jnp.where(jnp.isfinite(value), value, jnp.inf)
 
     def one(point, data: Data, lo, hi, free, anchor):
+        if basis is not None:
+            return one_per_channel(point, data, lo, hi, free, anchor)
         wi, wo, ref, sqrt_w, cos_i, floor = data
         zero = jnp.zeros((len(el_flat),), dtype=ref.dtype)
-        if basis is not None:
-            # One evaluation gives f_0 and every linear parameter's column (structure.basis_fn).
-            F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)
-            f0 = jnp.broadcast_to(F[:, -1:], ref.shape)
-            columns = [F[:, i : i + 1] - F[:, -1:] for i in range(len(lin))]
-        else:
-            f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
-            columns = []
-            for i, p in enumerate(lin):
-                ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
-                ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
-                columns.append(model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0)
+        f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
         if not lin:
             x, f = zero, f0
         else:
             cols = []
-            for i, g in enumerate(columns):
+            for i, p in enumerate(lin):
+                ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
+                ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
+                g = model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0
                 for e in elements:
                     if e[0] == i:
                         cols.append(g if e[1] < 0 else g * (jnp.arange(C) == e[1]))

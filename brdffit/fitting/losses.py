@@ -83,12 +83,19 @@ def log_rmse(f, ref, cos_i, used):
     return jnp.sqrt(jnp.sum(ld**2) / jnp.maximum(n, 1))
 
 
-def residual(loss: str, f, ref, cos_i, sqrt_w, floor):
-    """Per-sample, per-channel residuals (N, C) of model values f against reference values ref."""
+def reference_transform(loss: str, ref, cos_i, floor):
+    """g(f_ref) of a transform loss (None for ``relative``): the same at every step of a fit, so a
+    solver computes it once and hands it to :func:`residual`."""
+    return None if loss == "relative" else transform(loss, ref, cos_i, floor)
+
+
+def residual(loss: str, f, ref, cos_i, sqrt_w, floor, g_ref=None):
+    """Per-sample, per-channel residuals (N, C) of model values f against reference values ref.
+    ``g_ref``: :func:`reference_transform` of ref, when the caller has it."""
     if loss == "relative":
         d = (f - ref) / (jnp.abs(ref) + floor)
     else:
-        d = transform(loss, f, cos_i, floor) - transform(loss, ref, cos_i, floor)
+        d = transform(loss, f, cos_i, floor) - (transform(loss, ref, cos_i, floor) if g_ref is None else g_ref)
     return sqrt_w * d
 
 

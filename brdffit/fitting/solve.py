@@ -276,11 +276,14 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
 
     if solver_name == "lm":
         ne = normal_equations(model, loss)
-        solver = make_solver("lm", rtol, atol, normal_equations=ne)
+        # args = (data, g(f_ref)): the reference side of the loss is computed once per fit.
+        solver = make_solver("lm", rtol, atol, normal_equations=lambda y, a: ne(y, a[0], a[1]))
 
         def run(v0, data, lo, hi, free):
             v0 = jnp.clip(v0, lo, hi)
-            sol = optx.least_squares(lambda v, d: fn(v, d), solver, v0, args=data,
+            wi, wo, ref, sqrt_w, cos_i, floor = data
+            args = (data, L.reference_transform(loss, ref, cos_i, floor))
+            sol = optx.least_squares(lambda v, a: fn(v, a[0]), solver, v0, args=args,
                                      options={"lower": lo, "upper": hi, "free": free,
                                               "loss_floor": loss_floor(data)},
                                      max_steps=max_steps, throw=False)

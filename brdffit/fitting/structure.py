@@ -67,10 +67,10 @@ def _assemble(S: Float[Array, "C K P"], J3: Float[Array, "C K N"], r3: Float[Arr
     return jnp.sum(r3 * r3), g, H
 
 
-def _residual_and_slope(loss, f, data: Data):
+def _residual_and_slope(loss, f, data: Data, g_ref=None):
     """r (N, C) and dr/df (N, C): every loss is elementwise in f."""
     wi, wo, ref, sqrt_w, cos_i, floor = data
-    return jax.jvp(lambda f: L.residual(loss, f, ref, cos_i, sqrt_w, floor), (f,), (jnp.ones_like(f),))
+    return jax.jvp(lambda f: L.residual(loss, f, ref, cos_i, sqrt_w, floor, g_ref), (f,), (jnp.ones_like(f),))
 
 
 def basis_fn(model: Model):
@@ -93,15 +93,16 @@ def basis_fn(model: Model):
 
 @functools.lru_cache(maxsize=None)
 def normal_equations(model: Model, loss: str):
-    """(v (P,), data) -> (r.r, J^T r (P,), J^T J (P, P)), by the cheapest exact route for this
-    model (see the module docstring); equal to the dense computation to rounding."""
+    """(v (P,), data, g_ref=None) -> (r.r, J^T r (P,), J^T J (P, P)), by the cheapest exact route
+    for this model (see the module docstring); equal to the dense computation to rounding.
+    ``g_ref``: ``losses.reference_transform`` of the data, which a solver computes once per fit."""
     S = compression(model)
     C = model.channels
     if not separable(model):
         residual = flat_residual(model, loss)
         E = S.sum(axis=0).T > 0  # (P, K): flat entry p belongs to parameter k
 
-        def compressed(v, data):
+        def compressed(v, data, g_ref=None):
             Ej = jnp.asarray(E, dtype=v.dtype)
 
             def r_of(u):
@@ -121,7 +122,7 @@ def normal_equations(model: Model, loss: str):
     n_lin = len(lin)
     basis = basis_fn(model)
 
-    def structured(v, data: Data):
+    def structured(v, data: Data, g_ref=None):
         wi, wo = data[0], data[1]
         theta = jnp.stack([v[starts[k]] for k in nonlin]) if nonlin else jnp.zeros((0,), v.dtype)
         lam = jnp.stack([jnp.broadcast_to(v[starts[k] : starts[k + 1]], (C,)) for k in lin])  # (n_lin, C)
@@ -133,7 +134,7 @@ def normal_equations(model: Model, loss: str):
             F, dF = basis(theta, wi, wo), None
         B0, B = F[:, n_lin], F[:, :n_lin] - F[:, n_lin:]
         f = B0[:, None] + B @ lam  # (N, C)
-        r, slope = _residual_and_slope(loss, f, data)
+        r, slope = _residual_and_slope(loss, f, data, g_ref)
         cols = [None] * len(model.params)
         wT = slope.T  # (C, N)
         for j, k in enumerate(lin):
