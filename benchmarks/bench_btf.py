@@ -5,7 +5,7 @@ temporary folder) is read with ``load_btf`` and fitted with ``fit_btf``; in the 
 ``brdffit.fit`` over a random sample of ``--loop`` texels (not all of them: at ~3 fits/s the
 whole 64 x 64 would take half an hour) gives the baseline. Printed: the device(s) JAX runs on,
 texels/s of both (compile included for fit_btf, as a user sees it; the loop is warmed up first),
-their ratio, the steps of the solves (mean, median, max, and how many texels took each count),
+their ratio, the CPU time per texel (steadier than wall time on a shared machine), the steps of the solves (mean, median, max, and how many texels took each count),
 the losses' agreement on the sampled texels, the process's peak resident memory and the BTF's
 memory figures. ``--compare`` also runs ``fit_btf(..., neighbours=False)`` (every texel from the
 initialisation grid) in the same run: what the neighbour starts save.
@@ -59,25 +59,26 @@ def main() -> None:
         rng = np.random.default_rng(0)
         sample = [tuple(x) for x in rng.integers(0, args.size, (args.loop, 2))]
         brdffit.fit(btf.texel(*sample[0]), model)  # warm-up: compile outside the timing
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         singles = [brdffit.fit(btf.texel(r, c), model) for r, c in sample]
-        loop_s = time.perf_counter() - t
+        loop_s, loop_cpu = time.perf_counter() - t, time.process_time() - cpu
         loop_rate = len(sample) / loop_s
         print(f"loop of fit(): a random sample of {len(sample)} of the {args.size * args.size} texels in {loop_s:.1f} s = "
-              f"{loop_rate:.2f} texels/s (warm)")
+              f"{loop_rate:.2f} texels/s (warm); CPU time {loop_cpu / len(sample) * 1e3:.2f} ms per texel")
 
         n = args.size * args.size
         runs = [True, False] if args.compare else [True]
-        rates = {}
+        rates, cpu_per = {}, {}
         for neighbours in runs:
-            t = time.perf_counter()
+            t, cpu = time.perf_counter(), time.process_time()
             maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours)
-            fit_s = time.perf_counter() - t
+            fit_s, cpu_s = time.perf_counter() - t, time.process_time() - cpu
             rate = rates[neighbours] = n / fit_s
+            cpu_per[neighbours] = cpu_s / n
             steps = maps.steps.ravel()
             counts = np.bincount(steps)
             print(f"fit_btf (neighbours={neighbours}): {n} texels in {fit_s:.1f} s = {rate:.2f} texels/s (compile included); "
-                  f"{int(maps.converged.sum())}/{n} converged")
+                  f"CPU time {cpu_s:.1f} s = {cpu_s / n * 1e3:.2f} ms per texel; {int(maps.converged.sum())}/{n} converged")
             print(f"  steps: mean {steps.mean():.2f}, median {np.median(steps):.0f}, max {steps.max()}; texels per step count "
                   + ", ".join(f"{k}: {c}" for k, c in enumerate(counts) if c))
             print(f"  ratio fit_btf / loop of fit: {rate / loop_rate:.2f}x   (target >= 100 texels/s, aim 300)")
@@ -85,7 +86,8 @@ def main() -> None:
             print(f"  loss of fit_btf vs fit on the sampled texels: max relative difference {max(dev):.2e}")
             print(f"  peak RSS so far: {peak_rss_mb():.0f} MB")
         if args.compare:
-            print(f"neighbour starts vs grid starts: {rates[True] / rates[False]:.2f}x texels/s")
+            print(f"neighbour starts vs grid starts: {rates[True] / rates[False]:.2f}x texels/s, "
+                  f"{cpu_per[False] / cpu_per[True]:.2f}x less CPU time per texel")
         print(f"peak RSS of this process: {peak_rss_mb():.0f} MB")
 
 
