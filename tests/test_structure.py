@@ -95,3 +95,22 @@ def test_a_term_without_linear_parameters():
         ref = jax.jit(dense_normal_equations(mdl, loss))(v, prep.data)
         for a, b in zip(got, ref):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", ["ggx", "lambert+ggx+ggx", "ward", "oren_nayar+cook_torrance"])
+def test_with_the_once_per_fit_terms(name):
+    # What the solver passes: g(f_ref) and the direction-only terms, computed before the loop.
+    from brdffit.fitting.losses import reference_transform
+    from brdffit.fitting.structure import precompute_geometry
+
+    mdl = resolve_model(name, 3)
+    prep = _data(seed=3)
+    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
+    v = jnp.asarray(np.asarray(mdl.flatten(mdl.sample(jax.random.PRNGKey(3), margin=0.05))))
+    geometry = jax.jit(lambda d: precompute_geometry(mdl, d))(prep.data)
+    assert geometry is not None
+    got = jax.jit(lambda v, d, g, geo: normal_equations(mdl, "log")(v, d, g, geo))(
+        v, prep.data, reference_transform("log", ref, cos_i, floor), geometry)
+    want = jax.jit(dense_normal_equations(mdl, "log"))(v, prep.data)
+    for a, b in zip(got, want):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-11 * np.max(np.abs(np.asarray(b))))

@@ -264,7 +264,7 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
     The result is never NaN: when the final iterate is non-finite or worse than the start, the
     start (finite, in the box) is returned with a failure status.
     """
-    from .structure import gauss_newton_matrix, normal_equations
+    from .structure import gauss_newton_matrix, normal_equations, precompute_geometry
 
     fn = flat_residual(model, loss)
 
@@ -276,13 +276,13 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
 
     if solver_name == "lm":
         ne = normal_equations(model, loss)
-        # args = (data, g(f_ref)): the reference side of the loss is computed once per fit.
-        solver = make_solver("lm", rtol, atol, normal_equations=lambda y, a: ne(y, a[0], a[1]))
+        # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
+        solver = make_solver("lm", rtol, atol, normal_equations=lambda y, a: ne(y, *a))
 
         def run(v0, data, lo, hi, free):
             v0 = jnp.clip(v0, lo, hi)
             wi, wo, ref, sqrt_w, cos_i, floor = data
-            args = (data, L.reference_transform(loss, ref, cos_i, floor))
+            args = (data, L.reference_transform(loss, ref, cos_i, floor), precompute_geometry(model, data))
             sol = optx.least_squares(lambda v, a: fn(v, a[0]), solver, v0, args=args,
                                      options={"lower": lo, "upper": hi, "free": free,
                                               "loss_floor": loss_floor(data)},
