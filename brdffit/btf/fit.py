@@ -53,8 +53,9 @@ from .maps import ParameterMaps
 from .reader import BTF
 
 RUN_FILE = "run.json"
-#: Texels per compiled call (solve_batch's chunk, unless fit_btf is given ``chunk``): the passes
-#: over a 16 x 16 tile hold 16, 48 and 192 texels, so every call has one shape.
+#: Texels per compiled call (solve_batch's chunk, unless fit_btf is given ``chunk``; solve_batch
+#: splits a call's texels over its worker threads): the passes over a 16 x 16 tile hold 16, 48
+#: and 192 texels.
 GROUP = 16
 #: Lattice strides of the passes over a tile (see neighbour_passes): 1/16 of the texels start
 #: from the initialisation grid, the others from a fitted neighbour 1-2 texels away.
@@ -143,14 +144,20 @@ def _fit_texels(data, mdl, loss: str, batch_options: dict, starts=None):
     Returns flat params (n, P), loss, converged, steps."""
     from ..fitting.api import default_starts, parameter_space
     from ..fitting.batch import solve_batch
+    from ..fitting.problem import Data
 
     space = parameter_space(mdl, batch_options.get("bounds"), batch_options.get("fixed"),
                             batch_options.get("physical", False))
     multistart = batch_options.get("multistart")
     k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
     options = {"chunk": GROUP, **{key: batch_options[key] for key in _SOLVE_OPTIONS if key in batch_options}}
-    res = solve_batch(space, loss, data, k=k, starts=starts, grid=starts is None, **options)
-    return res["v"], res["loss"], res["code"] == 0, res["steps"]
+    # Padded (repeating the last texel) to a multiple of GROUP: the calls of every pass, edge tile
+    # and refit then share the few compiled shapes of full tiles' passes.
+    n = len(data[0])
+    pad = np.concatenate([np.arange(n), np.full(-n % GROUP, n - 1)])
+    res = solve_batch(space, loss, Data(*(a[pad] for a in data)), k=k, grid=starts is None,
+                      starts=None if starts is None else np.asarray(starts)[pad], **options)
+    return res["v"][:n], res["loss"][:n], res["code"][:n] == 0, res["steps"][:n]
 
 
 def _save_tile(folder: Path, t: int, arrays: dict) -> None:
