@@ -27,12 +27,14 @@ texels are fitted in passes over nested lattices (:func:`neighbour_passes`, stri
 the first pass (1/16 of the texels) starts from the initialisation grid like ``fit``, every
 later texel starts from the result of its nearest texel fitted in an earlier pass (1 or 1.4
 texels away), without the grid; a texel that does not converge so is fitted again from the
-grid. The grid costs more than a solve here (measured, 64 x 64 ggx BTF: 20 ms per texel from the
-grid, 10 ms from a neighbour, 2 shared cores), and a neighbour's start also saves solver steps
-(mean over the texels, losses equal to the grid-started fits within 1e-7 relative): the
-benchmark's 64 x 64 ggx BTF, 4.26 -> 3.36; a 16 x 16 mosaic of the 4 RGL materials, 7.75 -> 1.42
-(a region's texels hold one table: the neighbour's result is the answer); a 16 x 16 ggx BTF with
-maps that change fast from texel to texel, 4.27 -> 4.30 (the grid still skipped for 15/16).
+grid. Measured (CPU time, which a shared machine disturbs less than wall time; losses equal to
+the grid-started fits within 1e-7 relative): the compiled program of a 64 x 64 ggx BTF's texel
+takes 6.9 ms from the grid and 3.78 steps, 5.1 ms and 3.07 steps from its left neighbour's
+result; ``benchmarks/bench_btf.py --compare`` (64 x 64 ggx): 3.36 instead of 4.26 steps per
+texel, 7.7 instead of 8.5 ms of CPU per texel for the whole fit_btf. A 16 x 16 mosaic of the 4
+RGL materials: 7.75 -> 1.42 steps (a region's texels hold one table: the neighbour's result is
+the answer); a 16 x 16 ggx BTF with maps that change fast from texel to texel: 4.27 -> 4.30
+(only the grid is saved).
 Within a tile only, so that tiles stay independent (resuming, several processes).
 """
 
