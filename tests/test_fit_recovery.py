@@ -63,7 +63,10 @@ RANGES: dict[str, dict[str, tuple]] = {
 #: (The bounded LM of issue 8 recovers phong_classic-1 and torrance_sparrow-1/-3, which the old
 #: active-set solver lost to local minima.)
 KNOWN_FAILURES: dict[tuple[str, int], str] = {
-    ("lafortune", 2): "reports converged with n = 100.0 (truth 36.6): n stays at the grid start's value",
+    # Not a solver failure since the structured solver: the fit reaches the minimum of this noise
+    # draw (a fit started at the truth ends at the same loss, 3.69707e-7, and n = 35.92), but there
+    # n is 1.9 % and blue rho cz^n 2.2 % from the truth.
+    ("lafortune", 2): "the noise draw's minimum lies 2.2 % from the truth in blue rho cz^n (a fit from the truth ends there too)",
 }
 
 
