@@ -238,7 +238,7 @@ def fit_btf(
     import jax
 
     from ..fitting.losses import check_loss
-    from ..fitting.solve import check_solver
+    from ..fitting.program import check_solver
 
     if not isinstance(btf, BTF):
         raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")

@@ -24,6 +24,6 @@ from .compare import Report, compare  # noqa: E402
 from .losses import LOSSES  # noqa: E402
 from .result import FitResult  # noqa: E402
 from .select import Selection, select  # noqa: E402
-from .solve import SOLVERS  # noqa: E402
+from .._fit_defaults import SOLVERS  # noqa: E402
 
 __all__ = ["LOSSES", "SOLVERS", "FitResult", "Report", "Selection", "compare", "fit", "fit_batch", "select"]

@@ -16,10 +16,9 @@ from . import init as _init
 from .losses import check_loss
 from .problem import Data, flat_residual, loss_values, prepare, resolve_model
 from .result import FitResult
-from .program import program_args, run_fit
+from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
+from .program import STATUS_TEXT, check_solver, compiled, program_args, run_fit
 from .space import ParameterSpace, fit_warnings, sample_spacing
-from .solve import compiled
-from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, STATUS_TEXT, check_solver, solve_scipy
 from .structure import gauss_newton_matrix
 
 from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # noqa: E402
@@ -190,6 +189,8 @@ def fit(
     note("initialising: grid of starts" if init is None else "initialising: the given start")
     note(f"solving: {solver}, {n_starts} start{'s' if n_starts > 1 else ''}")
     if solver == "scipy":
+        from .solve import solve_scipy
+
         if init is None:
             starts, _, c_s, r_s = _init.best_starts(m, loss, data, lo, hi, free, anchor, k=n_starts, note=note)
             compile_s, run_s, init_s = c_s, r_s, c_s + r_s

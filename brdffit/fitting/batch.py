@@ -35,9 +35,9 @@ from ..measurement import Measurement
 from .api import DEFAULT_LOSS, DEFAULT_SOLVER, _result, _start_from, default_starts, parameter_space, space_options
 from .losses import check_loss
 from .problem import Data, prepare, resolve_model
-from .program import fit_program, program_args
+from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
+from .program import check_solver, compiled, fit_program, program_args
 from .result import FitResult
-from .solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, check_solver, compiled
 
 #: Fits per compiled call.
 DEFAULT_CHUNK = 256

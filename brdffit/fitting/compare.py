@@ -17,7 +17,7 @@ from .api import fit
 from .losses import LOSSES, check_loss
 from .problem import evaluate, prepare
 from .result import FitResult
-from .solve import check_solver
+from .program import check_solver
 
 from .._fit_defaults import COMPARE_SOLVERS as DEFAULT_SOLVERS
 

@@ -261,7 +261,7 @@ def subset_batch(data: Data, rows) -> Data:
 
 def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: int = 1, note=None):
     """The k best grid starts: flat params (k, P), their grid losses (k,), compile s, run s."""
-    from .solve import compiled
+    from .program import compiled
 
     grid = jnp.asarray(grid_for(model, lo, hi, free, anchor))
     args = (grid, subset(data), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool), jnp.asarray(anchor))

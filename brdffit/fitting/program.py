@@ -7,6 +7,9 @@ every loss and metric and J^T J at the solution (the standard errors' need; the 
 returns it from its last step). One dispatch per fit: a warm ggx fit spends its time in the
 solve, not in Python between compiled pieces.
 
+Compiled programs are kept per process and on disk (:func:`compiled`, ``cache``): a second process
+loads the program without tracing it, and without importing optimistix (``solve``).
+
 ``fit_batch`` maps the same program over a batch (``jax.lax.map``: a vmapped solve would run
 every lane until the slowest converges).
 """
@@ -15,15 +18,66 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._fit_defaults import SOLVERS
+from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
+from .cache import cache_enabled, exported
 from .problem import Data, flat_residual, loss_values
-from .solve import compiled, solve_starts
+
+#: Solvers that run compiled (and vmap): everything but scipy.
+COMPILED_SOLVERS = SOLVERS[:-1]
+_ALIASES = {"levenberg_marquardt": "lm", "gn": "gauss_newton", "gaussnewton": "gauss_newton", "trf": "scipy"}
+
+
+STATUS_TEXT = {
+    0: "converged",
+    1: "did not converge: maximum number of steps reached",
+    2: "did not converge: the solve diverged",
+    3: "did not converge: non-finite values during the solve",
+    4: "did not converge: the solver failed",
+}
+
+
+def check_solver(solver: str) -> str:
+    key = str(solver).strip().lower()
+    key = _ALIASES.get(key, key)
+    if key not in SOLVERS:
+        raise UsageError(f"unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
+    return key
+
+
+_CACHE: dict = {}
+
+
+def _shape_key(tree):
+    return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
+
+
+def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
+    """Compile ``build()`` for these argument shapes once per process and, through the disk cache
+    (``cache``), once per machine; returns (compiled function, compile seconds this call).
+
+    On disk: JAX's persistent cache keeps the compiled code, and ``cache.exported`` keeps the
+    traced program (``jax.export``), so that a second process skips tracing optimistix too."""
+    full = (key, _shape_key(example))
+    hit = _CACHE.get(full)
+    if hit is not None:
+        return hit, 0.0
+    if note is not None:
+        note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
+    t0 = time.perf_counter()
+    fn = exported(key, build, example)
+    dt = time.perf_counter() - t0
+    _CACHE[full] = fn
+    return fn, dt
 
 
 @functools.lru_cache(maxsize=None)
@@ -36,6 +90,8 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
     Candidates: the G grid points (linear parameters solved at each) when ``grid``, and the E
     ``given`` starts; the k with the lowest loss on the ``subset`` rows start the solver
     (G + E >= k)."""
+    from .solve import solve_starts  # optimistix: imported only when a program is traced
+
     vp = _init.vp_grid(model, loss)
     residual = flat_residual(model, loss)
     solve = solve_starts(model, loss, solver, rtol, atol, max_steps)

@@ -34,33 +34,12 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
-from ..errors import UsageError
 from ..models.base import Model
-from .cache import cache_enabled, exported
 from . import losses as L
 from .problem import Data, flat_residual
-
-#: Solvers that run compiled (and vmap): everything but scipy.
-COMPILED_SOLVERS = SOLVERS[:-1]
-_ALIASES = {"levenberg_marquardt": "lm", "gn": "gauss_newton", "gaussnewton": "gauss_newton", "trf": "scipy"}
-
-
-STATUS_TEXT = {
-    0: "converged",
-    1: "did not converge: maximum number of steps reached",
-    2: "did not converge: the solve diverged",
-    3: "did not converge: non-finite values during the solve",
-    4: "did not converge: the solver failed",
-}
-
-
-def check_solver(solver: str) -> str:
-    key = str(solver).strip().lower()
-    key = _ALIASES.get(key, key)
-    if key not in SOLVERS:
-        raise UsageError(f"unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
-    return key
-
+# Re-exported: solver names, statuses and the compile cache live where no optimistix import is
+# needed (a second process runs a cached program without importing optimistix).
+from .program import COMPILED_SOLVERS, STATUS_TEXT, check_solver, compiled  # noqa: F401
 
 def _status_code(result) -> jax.Array:
     """optimistix RESULTS -> int: 0 ok, 1 max steps, 2 diverged, 3 non-finite, 4 other."""
@@ -356,32 +335,6 @@ def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: f
         return v[i], value[i], code[i], steps[i], i, jtj[i]
 
     return run
-
-
-_CACHE: dict = {}
-
-
-def _shape_key(tree):
-    return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
-
-
-def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
-    """Compile ``build()`` for these argument shapes once per process and, through the disk cache
-    (``cache``), once per machine; returns (compiled function, compile seconds this call).
-
-    On disk: JAX's persistent cache keeps the compiled code, and ``cache.exported`` keeps the
-    traced program (``jax.export``), so that a second process skips tracing optimistix too."""
-    full = (key, _shape_key(example))
-    hit = _CACHE.get(full)
-    if hit is not None:
-        return hit, 0.0
-    if note is not None:
-        note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
-    t0 = time.perf_counter()
-    fn = exported(key, build, example)
-    dt = time.perf_counter() - t0
-    _CACHE[full] = fn
-    return fn, dt
 
 
 def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str = "exact"):
