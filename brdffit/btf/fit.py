@@ -103,14 +103,15 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
     lattice of texels from the initialisation grid, every later one starts each texel from its
     nearest fitted neighbour's result, without the grid (see the module docstring); those that
     do not converge so are fitted again from the grid."""
-    from ..fitting.problem import Data, prepare
+    from ..fitting.problem import Data, prepare_stack
+
+    from .reader import _texel_arrays
 
     values = btf.tile_values(t)  # (h, w, 6561, C) float32
     h, w = values.shape[:2]
-    preps = [prepare(btf._measurement(np.asarray(values[r, c], np.float64), f"{btf.name}[{r},{c}]"))
-             for r in range(h) for c in range(w)]
-    data = Data(*(np.stack([np.asarray(p.data[i]) for p in preps]) for i in range(6)))
-    n = len(preps)
+    data = prepare_stack(np.asarray(values, np.float64).reshape(h * w, *values.shape[2:]), *_texel_arrays(),
+                         name=f"{btf.name} tile {t}")
+    n = h * w
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
     passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]

@@ -99,6 +99,34 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
 
 
+def prepare_stack(values, wi, wo, weights, name: str = "batch") -> Data:
+    """:func:`prepare` of n measurements that share their directions and weights (the texels of a
+    BTF), at once: ``values`` (n, N, C) -> a ``Data`` of NumPy arrays with a leading axis n, equal
+    to stacking ``prepare`` of each (tested), without a Measurement per texel."""
+    values = np.asarray(values, dtype=np.float64)
+    wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+    w0 = np.asarray(weights, dtype=np.float64)
+    n, N, c = values.shape
+    shared = (w0 > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)  # (N,)
+    mask = shared[None, :] & np.all(np.isfinite(values), axis=2)  # (n, N)
+    n_used = mask.sum(axis=1)
+    if np.any(n_used == 0):
+        raise UsageError(f"{name}[{int(np.argmin(n_used))}]: no valid samples to fit (all have weight 0, "
+                         "non-finite values or lie below the horizon)")
+    up = np.array([0.0, 0.0, 1.0])
+    m3 = mask[:, :, None]
+    wi_s = np.where(m3, wi[None], up)
+    wo_s = np.where(m3, wo[None], up)
+    ref = np.where(m3, np.nan_to_num(values), 0.0)
+    w = np.where(mask, w0[None, :], 0.0)
+    total = w.sum(axis=1, keepdims=True)
+    sqrt_w = np.sqrt(w / (total * c))[:, :, None]
+    cos_i = np.clip(wi_s[:, :, 2:3], 1e-7, 1.0)
+    mean_abs = (np.abs(ref) * w[:, :, None]).sum(axis=1) / total
+    floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
+    return Data(wi_s, wo_s, ref, sqrt_w, cos_i, floor)
+
+
 def model_values(model: Model, params, data: Data):
     return model.eval(params, data[0], data[1])
 
