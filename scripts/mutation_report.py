@@ -23,6 +23,7 @@ from __future__ import annotations
 import fnmatch
 import json
 import sys
+import time
 import tomllib
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -38,9 +39,18 @@ STATUS = {1: KILLED, 3: KILLED, 37: KILLED, 0: SURVIVED, 5: NO_TESTS, 33: NO_TES
 def load_results(root: Path) -> dict[str, str]:
     results = {}
     for meta in sorted((root / "mutants").rglob("*.py.meta")):
-        for name, code in json.loads(meta.read_text())["exit_code_by_key"].items():
+        for name, code in _read_json(meta)["exit_code_by_key"].items():
             results[name] = STATUS.get(code, "suspicious")
     return results
+
+
+def _read_json(path: Path) -> dict:
+    for _ in range(20):  # a running mutmut rewrites these files; read again when caught mid-write
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError:
+            time.sleep(0.1)
+    return json.loads(path.read_text())
 
 
 def mutated_lines(name: str) -> list[str]:
@@ -64,9 +74,10 @@ def main(argv: list[str]) -> int:
                 status = "explained"
             else:
                 stale.append(name)
-        pkg = ".".join(name.split(".")[:2])
+        module = name.rsplit(".", 1)[0]  # the last part names the function (and the mutant)
+        pkg = ".".join(module.split(".")[:2])
         by_pkg[pkg][status] += 1
-        by_pkg[".".join(name.split(".")[:3])][status] += 1
+        by_pkg[module if module != pkg else pkg + ".__init__"][status] += 1
         if status in (SURVIVED, NO_TESTS, "suspicious"):
             survivors.append((name, status))
     print(f"{'package / file':<34} {'killed':>7} {'timeout':>8} {'explained':>10} {'survived':>9} "
