@@ -12,6 +12,8 @@ An explanation counts only while the mutant's diff (``mutmut show``) still adds 
 ``change``: mutant names are numbered within a function, so an edit of that function can give the
 name to another mutation; such an entry is printed as stale and the mutant counts as a survivor.
 
+Survivors that scripts/mutation_recheck.py killed (``mutants/recheck.json``) count as killed.
+
 Score = (killed + timeout + explained) / (all checked mutants). A timeout is a mutant that made the
 tests run past mutmut's CPU-time limit (an endless loop or a solver that never stops): detected.
 "Not checked" mutants (a run cut short or never started) are counted apart and not in the score.
@@ -29,6 +31,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 EQUIVALENTS = Path("tests/mutation_equivalents.toml")
+RECHECK = Path("mutants/recheck.json")  # scripts/mutation_recheck.py: survivors killed by their package's tests
 # mutmut 3.8 exit codes (mutmut/stats.py): 1 and 3 killed, 0 survived, 33/5 no tests, 36/24/-24/152/255
 # timeout (SIGXCPU), 37 caught by type check, None not checked, anything else suspicious.
 KILLED, SURVIVED, TIMEOUT, NO_TESTS, UNCHECKED = "killed", "survived", "timeout", "no tests", "not checked"
@@ -67,7 +70,12 @@ def main(argv: list[str]) -> int:
     equivalents = tomllib.loads(EQUIVALENTS.read_text())["mutants"] if EQUIVALENTS.exists() else {}
     by_pkg: dict[str, Counter] = defaultdict(Counter)
     survivors, stale = [], []
+    recheck = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
+    rechecked = 0
     for name, status in sorted(results.items()):
+        if status in (SURVIVED, TIMEOUT) and name in recheck:  # run again without a time limit
+            rechecked += recheck[name] == KILLED
+            status = KILLED if recheck[name] == KILLED else SURVIVED
         if status == SURVIVED and name in equivalents:
             change = equivalents[name]["change"].strip()
             if any(change in line for line in mutated_lines(name)):
@@ -89,6 +97,8 @@ def main(argv: list[str]) -> int:
             total.update(c)
         _row(key if key.count(".") == 1 else "  " + key.split(".")[-1] + ".py", c)
     _row("all", total)
+    if rechecked:
+        print(f"({rechecked} of the killed: mutmut's survivors killed by scripts/mutation_recheck.py)")
     for name in stale:
         print(f"stale explanation (the mutant's diff no longer shows its `change`): {name}")
     if survivors:
