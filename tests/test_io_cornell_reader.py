@@ -147,3 +147,12 @@ def test_binary_content_refused(tmp_path):
     with pytest.raises(InputError) as info:
         cornell.read(p)
     assert info.value.problem == "not a text Cornell .brdf file (binary content)"
+
+
+def test_non_ascii_text_is_refused(tmp_path):
+    """The reader decodes ASCII strictly: UTF-8 text (here an accented comment) is not taken."""
+    p = tmp_path / "utf8.brdf"
+    p.write_text("# mesur\u00e9\n1\n555\n0 0 0 0 2\n", encoding="utf-8")
+    with pytest.raises(InputError) as info:
+        cornell.read(p)
+    assert info.value.problem == "not a text Cornell .brdf file (binary content)"
