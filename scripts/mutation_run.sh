@@ -5,4 +5,6 @@
 cd "$(dirname "$0")/.." || exit 2
 VENV=${VENV:-.venv}
 [ -x "$VENV/bin/mutmut" ] || VENV=/work/main/.venv
+# the tests must import the mutated copy in mutants/, never this tree
+unset PYTHONPATH
 BRDFFIT_DATA=/nonexistent exec nice -n 19 "$VENV/bin/mutmut" run --max-children "${MUTATION_JOBS:-2}" "$@"
