@@ -93,7 +93,7 @@ def test_lookup_matches_reference_code(table_file):
 
 def test_negative_cells_and_lower_hemisphere_get_weight_zero(tmp_path):
     brdf = np.full(3 * 90 * 90 * 180, 150.0)
-    brdf[90 * 90 * 180 :: 7] = -1.0  # some green cells unmeasured
+    brdf[90 * 90 * 180 + 1 :: 7] = -1.0  # some green cells unmeasured (not the first: normal incidence)
     path = tmp_path / "neg.binary"
     path.write_bytes(struct.pack("<3i", 90, 90, 180) + brdf.astype("<f8").tobytes())
     m = merl.read(path)
