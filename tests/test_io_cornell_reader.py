@@ -156,3 +156,18 @@ def test_non_ascii_text_is_refused(tmp_path):
     with pytest.raises(InputError) as info:
         cornell.read(p)
     assert info.value.problem == "not a text Cornell .brdf file (binary content)"
+
+
+@pytest.mark.parametrize("wl, reader_says", [("200 600", False), ("200.5 600", False), ("500 2000", False),
+                                             ("500 2000.5", True), ("199.5 600", True)])
+def test_wavelength_plausibility_bounds(tmp_path, wl, reader_says):
+    """200..2000 nm pass the reader's own check (then the CIE table, 360..830 nm, refuses them);
+    beyond, the reader refuses the list itself."""
+    p = tmp_path / "wl.brdf"
+    p.write_text(f"2\n{wl}\n0 0 0 0 1 1\n")
+    with pytest.raises(ValueError) as info:
+        cornell.read(p)
+    if reader_says:
+        assert isinstance(info.value, InputError) and info.value.problem.startswith("implausible wavelength list")
+    else:
+        assert not isinstance(info.value, InputError) and "outside the CIE 1931 table" in str(info.value)
