@@ -171,3 +171,22 @@ def test_wavelength_plausibility_bounds(tmp_path, wl, reader_says):
         assert isinstance(info.value, InputError) and info.value.problem.startswith("implausible wavelength list")
     else:
         assert not isinstance(info.value, InputError) and "outside the CIE 1931 table" in str(info.value)
+
+
+@pytest.mark.parametrize("row", ["0 0 -0.1 0", "1.6 0 0 0", "0 0 1.6 0"])
+def test_theta_out_of_range_refused(tmp_path, row):
+    p = tmp_path / "t.brdf"
+    p.write_text(f"{GOOD}{row} 1 1\n")
+    with pytest.raises(InputError, match=r"^.*: theta outside \[0, pi/2\]"):
+        cornell.read(p)
+
+
+def test_any_phi_and_theta_up_to_the_tolerance_accepted(tmp_path):
+    """Only thetas are range-checked (pi/2 + 1e-6 still passes); azimuths may be negative or > pi/2;
+    a black spectrum is not counted as negative RGB."""
+    edge = repr(np.pi / 2 + 1e-6)
+    p = tmp_path / "ok.brdf"
+    p.write_text(f"{GOOD}0.1 3.0 {edge} -3.0 1 1\n{edge} -2.5 0.2 2.0 0 0\n")
+    m = cornell.read(p)
+    assert m.n_samples == 2 and dict(m.extra)["negative_rgb_clipped"] == 0
+    np.testing.assert_allclose(np.asarray(m.values), [[1, 1, 1], [0, 0, 0]], rtol=1e-12, atol=0)
