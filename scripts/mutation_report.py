@@ -9,7 +9,7 @@ equivalent mutants, ``tests/mutation_equivalents.toml``:
     reason = "why no observable behaviour changes"
 
 An explanation counts only while the mutant's diff (``mutmut show``) still adds a line containing
-``change``: mutant names are numbered within a function, so an edit of that function can give the
+``change`` ("- text" for a line the mutant deletes): mutant names are numbered within a function, so an edit of that function can give the
 name to another mutation; such an entry is printed as stale and the mutant counts as a survivor.
 
 Survivors that scripts/mutation_recheck.py killed (``mutants/recheck.json``) count as killed.
@@ -57,11 +57,12 @@ def _read_json(path: Path) -> dict:
 
 
 def mutated_lines(name: str) -> list[str]:
-    """The lines the mutant adds (``+`` lines of ``mutmut show``)."""
+    """The lines the mutant adds (``+`` lines of ``mutmut show``), and the ones it only removes,
+    prefixed "- " (a mutant that deletes an argument line adds nothing)."""
     from mutmut.mutation.diff_apply import get_diff_for_mutant
 
-    diff = get_diff_for_mutant(name)
-    return [ln[1:].strip() for ln in diff.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
+    diff = [ln for ln in get_diff_for_mutant(name).splitlines() if not ln.startswith(("+++", "---"))]
+    return [ln[1:].strip() for ln in diff if ln.startswith("+")] + ["- " + ln[1:].strip() for ln in diff if ln.startswith("-")]
 
 
 def main(argv: list[str]) -> int:

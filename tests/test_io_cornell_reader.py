@@ -190,3 +190,11 @@ def test_any_phi_and_theta_up_to_the_tolerance_accepted(tmp_path):
     m = cornell.read(p)
     assert m.n_samples == 2 and dict(m.extra)["negative_rgb_clipped"] == 0
     np.testing.assert_allclose(np.asarray(m.values), [[1, 1, 1], [0, 0, 0]], rtol=1e-12, atol=0)
+
+
+def test_provenance_written_into_the_metadata(tmp_path):
+    """What a saved table tells its reader about the conversion (SPEC: metadata travel with the data)."""
+    m = cornell.read(write(tmp_path / "p.brdf", [[0.3, 0.0, 0.3, np.pi, *np.ones(WL.size)]]))
+    extra = dict(m.extra)
+    assert extra["colour"] == "CIE 1931 2deg -> linear Rec.709, white-balanced: constant spectrum 1 -> RGB (1,1,1)"
+    assert extra["directions"] == "pbrt-v2: first pair = light (wi), second = view (wo), phi from +x"
