@@ -10,7 +10,8 @@ Mutants that ran past mutmut's CPU-time limit are rechecked too (without a limit
 compiles its JAX programs anew, which can exceed a limit derived from warm test timings.
 Kills are written to ``mutants/recheck.json`` (name -> "killed" or "survived"), which
 scripts/mutation_report.py reads; mutmut's own result files are left alone.
-Usage (from the repository root, after ``mutmut run``): python scripts/mutation_recheck.py GLOB...
+Usage (from the repository root, after ``mutmut run``):
+    python scripts/mutation_recheck.py GLOB... [tests/FILE.py ...]   (named test files replace the package's)
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import fnmatch
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -41,18 +43,21 @@ def test_files(name: str) -> list[str]:
     return [f.removeprefix("mutants/") for f in files]
 
 
-def main(globs: list[str]) -> int:
+def main(argv: list[str]) -> int:
+    globs = [a for a in argv if not a.startswith("tests/")]
+    only = [a for a in argv if a.startswith("tests/")]  # test files named: those instead of the package's
+    shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)  # the tests as they are now
     done = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
     todo = [n for n, s in load_results(Path(".")).items() if s in (SURVIVED, TIMEOUT) and any(fnmatch.fnmatch(n, g) for g in globs)]
     clean_packages = set()
     for name in todo:
         pkg = ".".join(name.split(".")[:2])
         if pkg not in clean_packages:  # a test failing without any mutant would "kill" every one
-            if _pytest("", test_files(name)).returncode != 0:
+            if _pytest("", only or test_files(name)).returncode != 0:
                 print(f"the {pkg} tests fail without a mutant; nothing rechecked", file=sys.stderr)
                 return 1
             clean_packages.add(pkg)
-        r = _pytest(name, test_files(name))
+        r = _pytest(name, only or test_files(name))
         done[name] = "killed" if r.returncode == 1 else "survived"
         print(f"{done[name]:<9} {name}", flush=True)
         RECHECK.write_text(json.dumps(done, indent=1))

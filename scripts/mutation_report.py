@@ -40,8 +40,14 @@ STATUS = {1: KILLED, 3: KILLED, 37: KILLED, 0: SURVIVED, 5: NO_TESTS, 33: NO_TES
 
 
 def load_results(root: Path) -> dict[str, str]:
+    cfg = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["mutmut"]
     results = {}
     for meta in sorted((root / "mutants").rglob("*.py.meta")):
+        source = str(meta.relative_to(root / "mutants")).removesuffix(".meta")
+        if not any(fnmatch.fnmatch(source, p) for p in cfg.get("only_mutate", ["*"])) or any(
+            fnmatch.fnmatch(source, p) for p in cfg.get("do_not_mutate", [])
+        ):
+            continue  # left over from a run before the configuration excluded the file
         for name, code in _read_json(meta)["exit_code_by_key"].items():
             results[name] = STATUS.get(code, "suspicious")
     return results
