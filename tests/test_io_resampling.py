@@ -92,3 +92,9 @@ def test_ubo_measurement_returned_as_is():
     wi, wo = ubo_pairs()
     m = brdffit.Measurement(wi=wi, wo=wo, values=np.ones((6561, 1)), grid="ubo81")
     assert resample(m) is m
+
+
+def test_reciprocity_is_the_default():
+    m, _ = scattered(n=60, seed=4)
+    assert "with reciprocity" in dict(interpolate_scattered(m).extra)["interpolation"]
+    assert "with reciprocity" in dict(resample(m).extra)["interpolation"]
