@@ -9,8 +9,8 @@ from brdffit.models.lafortune import lafortune
 
 LOBE = {  # name: (channels, lower, upper, role, doc, physical)
     "rho": (3, 0.0, math.inf, "albedo", "lobe scale", (0.0, 1.6e3)),
-    "cx": (1, -2.0, 2.0, "shape", "C_x = C_y", None),
-    "cz": (1, 0.0, 2.0, "shape", "C_z", None),
+    "cx": (1, -2.0, 2.0, "shape", "C_x = C_y", (-2.0, 2.0)),  # physical = the bounds when not given
+    "cz": (1, 0.0, 2.0, "shape", "C_z", (0.0, 2.0)),
     "n": (1, 1.0, math.inf, "exponent", "lobe exponent", (1.0, 1e4)),
 }
 
