@@ -48,7 +48,8 @@ def main(argv: list[str]) -> int:
     only = [a for a in argv if a.startswith("tests/")]  # test files named: those instead of the package's
     shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)  # the tests as they are now
     done = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
-    todo = [n for n, s in load_results(Path(".")).items() if s in (SURVIVED, TIMEOUT) and any(fnmatch.fnmatch(n, g) for g in globs)]
+    todo = [n for n, s in load_results(Path(".")).items()
+            if s in (SURVIVED, TIMEOUT) and done.get(n) != "killed" and any(fnmatch.fnmatch(n, g) for g in globs)]
     clean_packages = set()
     for name in todo:
         pkg = ".".join(name.split(".")[:2])
