@@ -139,3 +139,15 @@ def test_truncated_archive_message_is_one_line(tmp_path):
         with np.load(bad, allow_pickle=False) as z:
             z[member.removesuffix(".npy")]
     assert refusal(bad) == "corrupt .npz archive: " + " ".join(str(zip_error.value).split())
+
+
+def test_writer_does_not_overwrite_unless_forced(tmp_path):
+    m = npz.read(archive(tmp_path / "src.npz", wi=np.array([UP]), wo=np.array([UP]), values=np.ones(1)))
+    target = tmp_path / "out.npz"
+    npz.write(m, target)
+    before = target.read_bytes()
+    with pytest.raises(Exception) as info:
+        npz.write(m, target)
+    assert "exists" in str(info.value) and target.read_bytes() == before
+    npz.write(m, target, force=True)
+    assert np.array_equal(np.asarray(npz.read(target).values), [[1.0]])
