@@ -151,3 +151,12 @@ def test_writer_does_not_overwrite_unless_forced(tmp_path):
     assert "exists" in str(info.value) and target.read_bytes() == before
     npz.write(m, target, force=True)
     assert np.array_equal(np.asarray(npz.read(target).values), [[1.0]])
+
+
+def test_usable_rows_are_judged_one_by_one(tmp_path):
+    """One NaN row does not spoil the table; weight 0 everywhere does."""
+    two = dict(wi=np.array([UP, TILT]), wo=np.array([UP, TILT]))
+    m = npz.read(archive(tmp_path / "one_nan.npz", **two, values=np.array([[np.nan], [0.5]])))
+    assert np.isnan(np.asarray(m.values)[0, 0]) and np.asarray(m.values)[1, 0] == 0.5
+    zero = archive(tmp_path / "zero_w.npz", **two, values=np.array([[0.1], [0.5]]), weights=np.zeros(2))
+    assert refusal(zero) == "no usable sample: every value is NaN/inf or has weight 0"
