@@ -90,3 +90,8 @@ def test_native_output_is_captured_and_restored(capfd):
     assert captured == ["python stdout\npython stderr\n", "from C on fd 1\n", "from C on fd 2\n"]
     os.write(2, b"after\n")
     assert capfd.readouterr().err == "after\n"
+
+
+def test_query_directions_integers_become_float64():
+    wi, wo, _ = _common.query_directions([[0, 0, 1]], [[0, 0, 1]])
+    assert wi.dtype == np.float64 and wo.dtype == np.float64
