@@ -86,4 +86,22 @@ def test_all_nan_table_refused(tmp_path):
     np.full(SHAPE, np.nan).astype("<f8").tofile(p)
     with pytest.raises(InputError) as info:
         utia.read(p)
-    assert info.value.problem == "no finite value in the table"
+    assert info.value.path == str(p) and info.value.problem == "no finite value in the table"
+
+
+def test_near_pole_azimuth_is_kept_and_grazing_or_nan_cells_get_weight_zero(tmp_path, table_file):
+    path, table = table_file
+    light = direction(np.array([0.5]), np.array([90.0]))  # 0.5 degrees from the pole: its azimuth still counts
+    m = utia.read(path, wi=light, wo=direction(np.array([30.0]), np.array([0.0])))
+    np.testing.assert_allclose(np.asarray(m.values), reference(table, [0.5], [90.0], [30.0], [0.0]), rtol=1e-9)
+    grazing = utia.read(path, wi=[[1.0, 0, 0], [0, 0, 1.0], [0, 0, 1.0]], wo=[[0, 0, 1.0], [0, 1.0, 0], [0, 0, 1.0]])
+    assert np.asarray(grazing.weights).tolist() == [0.0, 0.0, 1.0]
+    holed = table.copy()
+    holed[1, 2] = np.nan  # green channel, light theta 30 degrees: unmeasured
+    p = tmp_path / "holed.bin"
+    holed.astype("<f8").tofile(p)
+    w = np.asarray(utia.read(p, wi=direction(np.array([30.0, 0.0]), np.array([0.0, 0.0])), wo=[[0, 0, 1.0]] * 2).weights)
+    assert w.tolist() == [0.0, 1.0]
+    extra = dict(m.extra)
+    assert extra["lookup"] == "multilinear in (theta_i, phi_i, theta_v, phi_v), 15 / 7.5 degree steps (UTIA reference loader)"
+    assert extra["light_directions"] == "nominal (the .bin table is on a regular grid)"
