@@ -79,11 +79,6 @@ def dot(a, b):
     return jnp.sum(a * b, axis=-1, keepdims=True)
 
 
-def safe_div(num, den, eps=COS_EPS):
-    """num / max(den, eps): for denominators that are non-negative by construction (cosines)."""
-    return num / jnp.maximum(den, eps)
-
-
 def hz_sq(h):
     """cos^2 theta of a unit vector, floored at COS_EPS^2 so that dividing by it stays finite."""
     return jnp.maximum(h[..., 2:3] ** 2, COS_EPS**2)
@@ -102,11 +97,6 @@ def log_cap(dtype) -> float:
 def capped_exp(x):
     """exp(min(x, log_cap)): overflow-free exponential (see ``log_cap``)."""
     return jnp.exp(jnp.minimum(x, log_cap(x.dtype)))
-
-
-def safe_log(x, tiny=1e-30):
-    """log(x) for x > 0, with the argument floored so that the gradient stays finite."""
-    return jnp.log(jnp.maximum(x, tiny))
 
 
 def capped_pow(base, exponent):

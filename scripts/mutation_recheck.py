@@ -1,0 +1,76 @@
+"""Re-run mutmut's survivors against every test file of their package, one process per mutant.
+
+Why: mutmut 3 runs, for each mutant, only the tests during which the mutated function ran in its
+stats pass. Code that runs at import time (e.g. ``lafortune.lobe_params`` building a parameter
+table) runs during the collection of the first test module, so mutmut credits it to one or two
+tests and never tries the tests that check that table. Here each survivor gets a fresh interpreter
+with the mutant active from the first import, and the package's test files (below) run.
+
+Mutants that ran past mutmut's CPU-time limit are rechecked too (without a limit): a fresh process
+compiles its JAX programs anew, which can exceed a limit derived from warm test timings.
+Kills are written to ``mutants/recheck.json`` (name -> "killed" or "survived"), which
+scripts/mutation_report.py reads; mutmut's own result files are left alone.
+Usage (from the repository root, after ``mutmut run``):
+    python scripts/mutation_recheck.py GLOB... [tests/FILE.py ...]   (named test files replace the package's)
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mutation_report import SURVIVED, TIMEOUT, load_results  # noqa: E402
+
+TESTS_BY_PACKAGE = {
+    "brdffit.models": ["tests/test_models_*.py"],
+    "brdffit.io": ["tests/test_io_*.py", "tests/test_malformed.py"],
+    "brdffit.fitting": ["tests/test_fit_core.py", "tests/test_fit_status.py", "tests/test_parameter_space.py"],
+}
+RECHECK = Path("mutants/recheck.json")
+
+
+def test_files(name: str) -> list[str]:
+    pkg = ".".join(name.split(".")[:2])
+    files = []
+    for pattern in TESTS_BY_PACKAGE[pkg]:
+        files += sorted(str(p) for p in Path("mutants").glob(pattern))
+    return [f.removeprefix("mutants/") for f in files]
+
+
+def main(argv: list[str]) -> int:
+    globs = [a for a in argv if not a.startswith("tests/")]
+    only = [a for a in argv if a.startswith("tests/")]  # test files named: those instead of the package's
+    shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)  # the tests as they are now
+    done = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
+    todo = [n for n, s in load_results(Path(".")).items()
+            if s in (SURVIVED, TIMEOUT) and done.get(n) != "killed" and any(fnmatch.fnmatch(n, g) for g in globs)]
+    clean_packages = set()
+    for name in todo:
+        pkg = ".".join(name.split(".")[:2])
+        if pkg not in clean_packages:  # a test failing without any mutant would "kill" every one
+            if _pytest("", only or test_files(name)).returncode != 0:
+                print(f"the {pkg} tests fail without a mutant; nothing rechecked", file=sys.stderr)
+                return 1
+            clean_packages.add(pkg)
+        r = _pytest(name, only or test_files(name))
+        done[name] = "killed" if r.returncode == 1 else "survived"
+        print(f"{done[name]:<9} {name}", flush=True)
+        RECHECK.write_text(json.dumps(done, indent=1))
+    return 0
+
+
+def _pytest(mutant: str, files: list[str]) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1"}
+    env.pop("PYTHONPATH", None)  # the mutated copy in mutants/ must be what the tests import
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "not slow", *files]
+    return subprocess.run(cmd, cwd="mutants", env=env, capture_output=True, text=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,97 @@
+"""Helpers shared by the readers (brdffit.io._common): the direction pairs an evaluable reader
+samples, the JSON form of metadata in .exr/.npz files, and the capture of native library output."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from brdffit.errors import UsageError
+from brdffit.grid import ubo_pairs
+from brdffit.io import _common
+
+
+def test_query_directions_default_is_the_ubo_grid():
+    wi, wo, grid = _common.query_directions()
+    ref_wi, ref_wo = ubo_pairs()
+    assert grid == "ubo81" and np.array_equal(wi, ref_wi) and np.array_equal(wo, ref_wo)
+
+
+def test_query_directions_given_pairs():
+    wi, wo, grid = _common.query_directions([0, 0, 1], [[0.6, 0, 0.8]])
+    assert grid is None and wi.shape == (1, 3) and wo.shape == (1, 3) and wi.dtype == np.float64
+    assert wi.tolist() == [[0.0, 0.0, 1.0]] and wo.tolist() == [[0.6, 0.0, 0.8]]
+
+
+@pytest.mark.parametrize(
+    "wi, wo, message",
+    [
+        ([0, 0, 1], None, "give both wi and wo (light and view directions), or neither for the UBO-81 grid"),
+        (None, [0, 0, 1], "give both wi and wo (light and view directions), or neither for the UBO-81 grid"),
+        ([[0, 0, 1]], [[0, 0, 1], [0, 0, 1]], "wi (1, 3) and wo (2, 3) must both be (N, 3)"),
+        ([[0, 1]], [[0, 1]], "wi (1, 2) and wo (1, 2) must both be (N, 3)"),
+        (np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), "wi (1, 1, 3) and wo (1, 1, 3) must both be (N, 3)"),
+    ],
+)
+def test_query_directions_refusals(wi, wo, message):
+    with pytest.raises(UsageError) as info:
+        _common.query_directions(wi, wo)
+    assert str(info.value) == message
+
+
+class Meta:
+    """The fields meta_to_json reads from a Measurement."""
+
+    name, source, grid, colour_space, units = "n", "s.npz", "ubo81", "linear_rec709", "1/sr"
+    extra = (("tuple", (1, 2.5, ("a", None))), ("np", np.float32(0.5)), ("flag", True), ("dict", {"k": [1]}),
+             ("path", os.path.join("a", "b")), ("obj", complex(1, 2)), ("nan", float("nan")))
+
+
+def test_metadata_json_round_trip():
+    text = _common.meta_to_json(Meta())
+    doc = json.loads(text)
+    assert [doc[k] for k in _common.META_FIELDS] == ["n", "s.npz", "ubo81", "linear_rec709", "1/sr"]
+    back = _common.meta_from_json(text)
+    assert {k: back[k] for k in _common.META_FIELDS} == {k: getattr(Meta, k) for k in _common.META_FIELDS}
+    extra = back["extra"]
+    assert extra["tuple"] == (1, 2.5, ("a", None))
+    assert extra["np"] == 0.5 and type(extra["np"]) is float
+    assert extra["flag"] is True
+    assert extra["dict"] == (("k", (1,)),)  # a dict comes back as (key, value) pairs, its list as a tuple
+    assert extra["path"] == os.path.join("a", "b")
+    assert extra["obj"] == "(1+2j)"  # anything exotic survives as its text
+    assert np.isnan(extra["nan"])
+    assert list(extra) == ["tuple", "np", "flag", "dict", "path", "obj", "nan"]
+
+
+def test_metadata_json_wire_format():
+    """The on-disk form: tuples and dicts tagged, so that a reader can tell them from lists."""
+    doc = json.loads(_common.meta_to_json(Meta()))
+    assert doc["extra"][0] == ["tuple", {"__tuple__": [1, 2.5, {"__tuple__": ["a", None]}]}]
+    assert doc["extra"][3] == ["dict", {"__dict__": [["k", {"__tuple__": [1]}]]}]
+
+
+def test_metadata_json_partial_and_refused():
+    assert _common.meta_from_json('{"name": "x"}') == {"name": "x", "extra": {}}
+    with pytest.raises(ValueError, match="^metadata is not a JSON object$"):
+        _common.meta_from_json("[1]")
+
+
+def test_native_output_is_captured_and_restored(capfd):
+    with _common.native_stderr_captured() as captured:
+        os.write(1, b"from C on fd 1\n")
+        os.write(2, b"from C on fd 2\n")
+        print("python stdout")
+        print("python stderr", file=sys.stderr)
+    assert captured == ["python stdout\npython stderr\n", "from C on fd 1\n", "from C on fd 2\n"]
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "after\n"
+
+
+def test_query_directions_integers_become_float64():
+    wi, wo, _ = _common.query_directions([[0, 0, 1]], [[0, 0, 1]])
+    assert wi.dtype == np.float64 and wo.dtype == np.float64

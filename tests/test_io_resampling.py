@@ -1,0 +1,100 @@
+"""Scattered samples onto UBO-81 without the shared data: coordinates by hand, extrapolation and
+its weights against a brute-force nearest neighbour and scipy's Delaunay hull, and the refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+import brdffit
+from brdffit.errors import InputError, UsageError
+from brdffit.grid import ubo_pairs
+from brdffit.io.resampling import interpolate_scattered, isotropic_coords, resample
+
+
+def direction(theta_deg, phi_deg):
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+
+
+def test_isotropic_coords_by_hand():
+    wi = direction(np.array([30.0, 30.0, 50.0]), np.array([0.0, 350.0, 100.0]))
+    wo = direction(np.array([60.0, 10.0, 20.0]), np.array([270.0, 0.0, 300.0]))
+    got = np.degrees(isotropic_coords(wi, wo))
+    np.testing.assert_allclose(got, [[30, 60, 90], [30, 10, 10], [50, 20, 160]], atol=1e-9)
+
+
+def scattered(theta_light_max=40.0, n=400, seed=0):
+    """Samples of f = 1 + theta_light + theta_view + dphi/4 (radians): lights up to theta_light_max."""
+    rng = np.random.default_rng(seed)
+    wi = direction(rng.uniform(0, theta_light_max, n), rng.uniform(0, 360, n))
+    wo = direction(rng.uniform(0, 40, n), rng.uniform(0, 360, n))
+    x = isotropic_coords(wi, wo)
+    values = (1 + x[:, 0] + x[:, 1] + x[:, 2] / 4)[:, None] * np.array([1.0, 2.0, 3.0])
+    return brdffit.Measurement(wi=wi, wo=wo, values=values, name="s", source="s.npz", extra={"format": "cornell"}), x
+
+
+@pytest.mark.parametrize("reciprocal", [True, False])
+def test_extrapolation_is_nearest_sample_with_distance_weight(reciprocal):
+    m, x = scattered()
+    r = interpolate_scattered(m, reciprocal=reciprocal)
+    assert r.grid == "ubo81" and r.n_samples == 6561 and r.name == "s" and r.source == "s.npz"
+    pts = np.concatenate([x, x[:, [1, 0, 2]]]) if reciprocal else x
+    vals = np.asarray(m.values)
+    vals = np.concatenate([vals, vals]) if reciprocal else vals
+    q = isotropic_coords(*ubo_pairs())
+    dist = np.linalg.norm(q[:, None, :] - pts[None, :, :], axis=2)  # brute force, (6561, N)
+    nearest, d = dist.argmin(axis=1), dist.min(axis=1)
+    outside = Delaunay(pts).find_simplex(q) < 0
+    w = np.asarray(r.weights)
+    v = np.asarray(r.values)
+    # (the reader rounds coordinates to 1e-9 rad to merge coincident points: distances agree to ~1e-9)
+    np.testing.assert_allclose(w[outside], 1 / (1 + (d[outside] / np.radians(10)) ** 2), rtol=1e-7)
+    assert np.all(w[~outside] == 1.0)
+    np.testing.assert_allclose(v[outside], vals[nearest[outside]], rtol=1e-12)
+    inside_exact = 1 + q[~outside, 0] + q[~outside, 1] + q[~outside, 2] / 4  # linear: reproduced inside the hull
+    np.testing.assert_allclose(v[~outside, 1], 2 * inside_exact, rtol=1e-9)
+    extra = dict(r.extra)
+    assert extra["extrapolated"] == int(outside.sum()) > 0
+    assert extra["max_extrapolation_deg"] == pytest.approx(np.degrees(d[outside].max()), rel=1e-7)
+    assert extra["max_gap_deg"] == pytest.approx(np.degrees(d.max()), rel=1e-7)
+    assert extra["resampled_from"] == "400 scattered samples (cornell)"
+    assert extra["interpolation"] == ("piecewise linear (Delaunay) in (theta_light, theta_view, |dphi|)"
+                                      + (", with reciprocity (light/view swapped)" if reciprocal else "")
+                                      + "; nearest sample outside the hull")
+    assert extra["extrapolated_weight"] == "1 / (1 + (d / 10 deg)^2)"
+
+
+def test_refusals():
+    m, _ = scattered(n=4)
+    with pytest.raises(InputError) as info:
+        interpolate_scattered(m)
+    assert str(info.value) == "s.npz: only 4 valid samples: too few to interpolate"
+    flat = brdffit.Measurement(wi=direction(np.full(8, 30.0), np.zeros(8)), wo=direction(np.full(8, 30.0), np.zeros(8)),
+                               values=np.ones((8, 1)), name="flat")
+    with pytest.raises(InputError) as info:
+        interpolate_scattered(flat)
+    assert str(info.value).startswith("flat: the 8 valid samples do not span the directions (flat or coincident in "
+                                      "theta_light, theta_view, dphi): cannot interpolate them onto the UBO-81 grid (")
+    with pytest.raises(UsageError) as info:
+        resample(m, grid="merl")
+    assert str(info.value) == "unknown grid 'merl'; supported: 'ubo81'"
+    with pytest.raises(UsageError) as info:
+        resample(m, wi=1)
+    assert str(info.value) == "options ['wi'] apply only when resampling a path"
+    with pytest.raises(UsageError) as info:
+        resample(3.5)
+    assert str(info.value) == "resample() takes a Measurement or a path, not float"
+
+
+def test_ubo_measurement_returned_as_is():
+    wi, wo = ubo_pairs()
+    m = brdffit.Measurement(wi=wi, wo=wo, values=np.ones((6561, 1)), grid="ubo81")
+    assert resample(m) is m
+
+
+def test_reciprocity_is_the_default():
+    m, _ = scattered(n=60, seed=4)
+    assert "with reciprocity" in dict(interpolate_scattered(m).extra)["interpolation"]
+    assert "with reciprocity" in dict(resample(m).extra)["interpolation"]
