@@ -238,25 +238,15 @@ def _subset_index(n: int) -> np.ndarray | None:
     return np.sort(np.random.default_rng(0).choice(n, GRID_SAMPLES, replace=False))
 
 
-def subset(data: Data) -> Data:
+def take_rows(data: Data, idx) -> Data:
+    """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
-    idx = _subset_index(n)
-    if idx is None:
-        return data
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
 
 
-def subset_batch(data: Data, rows) -> Data:
-    """The grid's samples of the fits ``rows`` of a batch (arrays (B, N, ...) and floor (B, C))."""
-    n = data[0].shape[1]
-    idx = _subset_index(n)
-    out = []
-    for a in data:
-        a = np.asarray(a)[rows]
-        if idx is not None and a.ndim >= 3 and a.shape[1] == n:
-            a = a[:, idx]
-        out.append(jnp.asarray(a))
-    return Data(*out)
+def subset(data: Data) -> Data:
+    idx = _subset_index(data[0].shape[0])
+    return data if idx is None else take_rows(data, idx)
 
 
 def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: int = 1, note=None):

@@ -127,10 +127,6 @@ def prepare_stack(values, wi, wo, weights, name: str = "batch") -> Data:
     return Data(wi_s, wo_s, ref, sqrt_w, cos_i, floor)
 
 
-def model_values(model: Model, params, data: Data):
-    return model.eval(params, data[0], data[1])
-
-
 def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
     wi, wo, ref, sqrt_w, cos_i, floor = data
     f = model.eval(params, wi, wo)

@@ -98,8 +98,7 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
     metrics = loss_values(model)
 
     def run(grid_points, given, data: Data, lo, hi, free, anchor, subset):
-        n = data[0].shape[0]
-        sub = Data(*(a[subset] if a.ndim and a.shape[0] == n else a for a in data))
+        sub = _init.take_rows(data, subset)
         given = jnp.where(free, jnp.clip(given, lo, hi), anchor)
 
         def subset_loss(v):

@@ -258,6 +258,15 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         r = fn(v, data)
         return r @ r
 
+    def no_worse(v0, l0, v, code, data):
+        """(v, loss, code): the solver's point, or the start with a failure status where that
+        point is non-finite or worse than the start beyond roundoff, whatever the solver claims."""
+        l1 = loss_of(v, data)
+        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
+        code = jnp.where(ok | (code != 0), code, 2)
+        code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
+        return jnp.where(ok, v, v0), jnp.where(ok, l1, l0), code, ok
+
     if solver_name == "lm":
         ne = normal_equations(model, loss)
         # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
@@ -272,15 +281,10 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
                                               "loss_floor": loss_floor(data)},
                                      max_steps=max_steps, throw=False)
             # The iterate moves only to accepted points (finite, lower loss), so the final state's
-            # loss and J^T J are those of sol.value. One residual checks that anyway (the result is
-            # never worse than the start, whatever a solver claims).
-            v, value, code, steps, jtj = sol.value, loss_of(sol.value, data), _status_code(sol.result), \
-                sol.stats["num_steps"], sol.stats["jtj"]
-            ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(value) & \
-                (value <= sol.stats["loss0"] * (1 + 1e-9) + loss_floor(data))
-            code = jnp.where(ok | (code != 0), code, 2)
-            return (jnp.where(ok, v, v0), jnp.where(ok, value, sol.stats["loss0"]), code, steps,
-                    jnp.where(ok, jtj, jnp.nan))
+            # J^T J is that of sol.value, and the start's loss is in the state. One residual checks
+            # the result anyway.
+            v, value, code, ok = no_worse(v0, sol.stats["loss0"], sol.value, _status_code(sol.result), data)
+            return v, value, code, sol.stats["num_steps"], jnp.where(ok, sol.stats["jtj"], jnp.nan)
 
         return run
 
@@ -309,14 +313,8 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         sol = optx.least_squares(lambda z, d: fn_x(z / scale, d), solver, x0 * scale, args=data,
                                  max_steps=max_steps, throw=False)
         v = to_box(jnp.where(free, sol.value / scale, x0), lo, hi)
-        code = _status_code(sol.result)
-        l0, l1 = loss_of(v0, data), loss_of(v, data)
-        # Worse than the start (beyond roundoff): a stock solver wandered off.
-        ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(l1) & (l1 <= l0 * (1 + 1e-9) + loss_floor(data))
-        code = jnp.where(ok | (code != 0), code, 2)
-        code = jnp.where(jnp.isfinite(l1) | (code != 0), code, 3)
-        v = jnp.where(ok, v, v0)
-        return v, jnp.where(ok, l1, l0), code, sol.stats["num_steps"], jtj(v, data)
+        v, value, code, _ = no_worse(v0, loss_of(v0, data), v, _status_code(sol.result), data)
+        return v, value, code, sol.stats["num_steps"], jtj(v, data)
 
     return run
 
