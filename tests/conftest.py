@@ -41,6 +41,24 @@ def cornell_params():
     ]
 
 
+@pytest.fixture(scope="module")
+def full_folder(tmp_path_factory):
+    """A complete UBO-81 image folder of 1x1 grey PNGs (the malformed-input tests break one image
+    of it at a time and restore it)."""
+    import numpy as np
+    from PIL import Image
+
+    from brdffit.io.images import direction_name
+
+    root = tmp_path_factory.mktemp("full") / "btf"
+    root.mkdir()
+    img = Image.fromarray(np.full((1, 1, 3), 128, np.uint8))
+    for i in range(81):
+        for j in range(81):
+            img.save(root / f"{direction_name(i, j)}.png")
+    return root
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     d = data_dir()

@@ -186,17 +186,6 @@ def unparsable_name(d):
     return p, bad
 
 
-@pytest.fixture(scope="module")
-def full_folder(tmp_path_factory):
-    root = tmp_path_factory.mktemp("full") / "btf"
-    root.mkdir()
-    img = Image.fromarray(np.full((1, 1, 3), 128, np.uint8))
-    for i in range(81):
-        for j in range(81):
-            img.save(root / f"{direction_name(i, j)}.png")
-    return root
-
-
 CASES = [
     truncated_exr, wrong_magic_exr, garbage_exr, nan_only_exr, wrong_size_exr,
     truncated_npz, empty_npz, npz_missing_arrays, nan_only_npz,

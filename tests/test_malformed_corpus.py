@@ -409,17 +409,6 @@ def test_malformed_corpus(work, capfd, request):
     assert not failures, f"{len(failures)} of {runs} runs misbehaved:\n" + "\n".join(failures[:40])
 
 
-@pytest.fixture(scope="module")
-def full_folder(tmp_path_factory):
-    root = tmp_path_factory.mktemp("full") / "btf"
-    root.mkdir()
-    img = Image.fromarray(np.full((1, 1, 3), 128, np.uint8))
-    for i in range(81):
-        for j in range(81):
-            img.save(root / f"{direction_name(i, j)}.png")
-    return root
-
-
 def test_image_folder_corpus(full_folder, tmp_path, capfd):
     """A complete UBO folder with one image broken in turn (truncated at several offsets, text,
     a folder in its place, removed): exit 2 naming the broken image (or the folder)."""
