@@ -205,3 +205,18 @@ def test_progress_reports_the_phases():
     fit(_measurement(n=200), "ggx", progress=seen.append)
     text = " | ".join(seen)
     assert "initialising" in text and "solving" in text and "solved" in text
+
+
+@pytest.mark.parametrize("name", ["ggx", "cook_torrance", "ward"])
+def test_default_tolerance_stops_within_it_of_the_minimum(name):
+    # The solver stops when the next step would bring less than rtol x the loss (MINPACK's test, or
+    # the Gauss-Newton decrement at the new point): its loss is then within ~rtol of the minimum a
+    # much tighter solve reaches from the same start. Noisy data (5 %), so that the loss is not ~0.
+    from brdffit._fit_defaults import DEFAULT_RTOL
+
+    m = _measurement(noise=0.05, seed=4)
+    default = fit(m, name)
+    tight = fit(m, name, init=default.start, rtol=1e-13, max_steps=500)
+    assert default.converged, default.status
+    assert tight.loss_value <= default.loss_value * (1 + 1e-12)
+    assert default.loss_value <= tight.loss_value * (1 + 3 * DEFAULT_RTOL), (default.loss_value / tight.loss_value - 1)

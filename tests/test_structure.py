@@ -114,3 +114,20 @@ def test_with_the_once_per_fit_terms(name):
     want = jax.jit(dense_normal_equations(mdl, "log"))(v, prep.data)
     for a, b in zip(got, want):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-11 * np.max(np.abs(np.asarray(b))))
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_model_values_equal_model_eval(name):
+    # What the program evaluates for the result check and the metrics: the step's route (the basis
+    # from the direction-only terms) where the model is separable, model.eval otherwise.
+    from brdffit.fitting.structure import model_values, precompute_geometry
+
+    mdl = resolve_model(name, 3)
+    prep = _data(seed=5)
+    v = jnp.asarray(np.asarray(mdl.flatten(mdl.sample(jax.random.PRNGKey(5), margin=0.05))))
+    geometry = jax.jit(lambda d: precompute_geometry(mdl, d))(prep.data)
+    assert (geometry is not None) == separable(mdl), name
+    got = np.asarray(jax.jit(model_values(mdl))(v, prep.data, geometry))
+    want = np.asarray(mdl.eval(mdl.unflatten(v), prep.data[0], prep.data[1]))
+    assert got.shape == want.shape == (300, 3)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14 * np.max(np.abs(want)), err_msg=name)

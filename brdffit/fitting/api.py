@@ -109,7 +109,18 @@ def default_starts(model: Model) -> int:
 def parameter_space(model: Model, bounds=None, fixed=None, physical: bool = False) -> ParameterSpace:
     """Where a fit of ``model`` may move (``brdffit.fitting.space``): flat ``lo``/``hi`` (may be
     infinite) and ``free`` mask, the runtime arguments of the init and of every solver."""
+    if not bounds and not fixed:
+        return _default_space(model, bool(physical))
     return ParameterSpace.build(model, bounds, fixed, physical)
+
+
+@functools.lru_cache(maxsize=64)
+def _default_space(model: Model, physical: bool) -> ParameterSpace:
+    """The space of a fit without overrides, built once per model (its arrays are read-only)."""
+    space = ParameterSpace.build(model, None, None, physical)
+    for a in (space.lo, space.hi, space.free, space.values):
+        a.flags.writeable = False
+    return space
 
 
 def space_options(bounds, fixed, physical) -> dict:
@@ -236,13 +247,14 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
     if metrics is None or jtj is None:
         # Through the disk cache, like the solve (a second process traces nothing).
         args = (jnp.asarray(v, dtype=jnp.float64), prep.data)
-        metrics_fn, _ = compiled(("metrics", m), lambda: loss_values(m), *args)
+        metrics_fn, _ = compiled(("metrics", m, loss), lambda: lambda v, d: loss_values(m)(v, d, (loss,)), *args)
         jtj_fn, _ = compiled(("jtj", m, loss), lambda: gauss_newton_matrix(m, loss), *args)
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
     at_bound = space.at_bound(v)
-    wo = np.asarray(measurement.wo)[np.asarray(measurement.valid_mask(), dtype=bool)]
+    used = prep.used if prep.used is not None else np.asarray(measurement.valid_mask(), dtype=bool)
+    wo = np.asarray(measurement.wo)[used]
     warnings = fit_warnings(space, v, at_bound, stderr, sample_spacing(wo))
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:

@@ -42,6 +42,7 @@ class Prepared:
     n_excluded: int
     excluded: dict[str, int]  # reason -> count (a sample may have several reasons)
     channels: int
+    used: np.ndarray | None = None  # (N,) bool: the samples the fit uses
 
 
 def resolve_model(model, channels: int) -> Model:
@@ -52,24 +53,32 @@ def resolve_model(model, channels: int) -> Model:
     return m if m.channels == channels else m.with_channels(channels)
 
 
-def exclusion_reasons(m: Measurement) -> dict[str, int]:
-    values = np.asarray(m.values)
-    w = np.asarray(m.weights)
-    wi, wo = np.asarray(m.wi), np.asarray(m.wo)
+def _exclusions(values, w, wi, wo) -> dict[str, np.ndarray]:
+    """Reason -> (N,) bool: the samples a fit may not use, by reason (``Measurement.valid_mask``
+    is their complement)."""
     return {
-        "weight 0": int(np.sum(~(w > 0))),
-        "non-finite value": int(np.sum(~np.all(np.isfinite(values), axis=1))),
-        "light below horizon": int(np.sum(~(wi[:, 2] > 0))),
-        "view below horizon": int(np.sum(~(wo[:, 2] > 0))),
+        "weight 0": ~(w > 0),
+        "non-finite value": ~np.all(np.isfinite(values), axis=1),
+        "light below horizon": ~(wi[:, 2] > 0),
+        "view below horizon": ~(wo[:, 2] > 0),
     }
+
+
+def exclusion_reasons(m: Measurement) -> dict[str, int]:
+    out = _exclusions(np.asarray(m.values), np.asarray(m.weights), np.asarray(m.wi), np.asarray(m.wo))
+    return {k: int(np.sum(v)) for k, v in out.items()}
 
 
 def prepare(m: Measurement, weights=None) -> Prepared:
     """Arrays for the compiled residual; excluded samples get weight 0 and safe stand-ins."""
     if not isinstance(m, Measurement):
         raise UsageError(f"expected a brdffit.Measurement, got {type(m).__name__}")
-    mask = m.valid_mask()
-    w = np.asarray(m.weights, dtype=np.float64).copy()
+    # Each field read once (a Measurement's fields are JAX arrays behind equinox attribute access).
+    values = np.asarray(m.values, dtype=np.float64)
+    wi, wo = np.asarray(m.wi, dtype=np.float64), np.asarray(m.wo, dtype=np.float64)
+    w = np.asarray(m.weights, dtype=np.float64)
+    excluded = _exclusions(values, w, wi, wo)
+    mask = ~np.logical_or.reduce(list(excluded.values()))
     if weights is not None:
         extra = np.asarray(weights, dtype=np.float64)
         if extra.shape != w.shape:
@@ -79,24 +88,25 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     n_used = int(mask.sum())
     if n_used == 0:
         raise UsageError(f"{m.name}: no valid samples to fit (all have weight 0, non-finite values or lie below the horizon)")
-    c = m.n_channels
+    c = values.shape[1]
     up = np.array([0.0, 0.0, 1.0])
-    wi = np.where(mask[:, None], np.asarray(m.wi, dtype=np.float64), up)
-    wo = np.where(mask[:, None], np.asarray(m.wo, dtype=np.float64), up)
-    ref = np.where(mask[:, None], np.nan_to_num(np.asarray(m.values, dtype=np.float64)), 0.0)
+    m2 = mask[:, None]
+    wi = np.where(m2, wi, up)
+    wo = np.where(m2, wo, up)
+    ref = np.where(m2, values, 0.0)  # the mask holds finite rows only
     w = np.where(mask, w, 0.0)
+    w_sum = w.sum()
     # Normalise: sum of squared residuals = weighted mean over samples and channels.
-    sqrt_w = np.sqrt(w / (w.sum() * c))[:, None]
+    sqrt_w = np.sqrt(w / (w_sum * c))[:, None]
     cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
-    mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w.sum()
+    mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w_sum  # as prepare_stack (tested equal)
     # Relative to the data (see losses: a table scaled by 1e-12 fits as the original).
     floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
-    reasons = {k: v for k, v in exclusion_reasons(m).items() if v}
-    # device_put, not jnp.asarray: the latter compiles a copy program per shape (~10-40 ms each in a
-    # new process). device_put may share these arrays' memory, which is safe: they were made above
-    # and nothing else holds them.
-    data = Data(*(jax.device_put(a) for a in (wi, wo, ref, sqrt_w, cos_i, floor)))
-    return Prepared(data, n_used, int(m.n_samples - n_used), reasons, c)
+    reasons = {k: n for k, n in ((k, int(v.sum())) for k, v in excluded.items()) if n}
+    # NumPy arrays: a compiled call takes them as they are (one transfer with the call); an eager
+    # jax.device_put per array cost ~0.25 ms each, and jnp.asarray compiles a copy program per shape.
+    data = Data(wi, wo, ref, sqrt_w, cos_i, floor)
+    return Prepared(data, n_used, int(len(mask) - n_used), reasons, c, mask)
 
 
 def prepare_stack(values, wi, wo, weights, name: str = "batch") -> Data:
@@ -153,23 +163,29 @@ def loss_values_fn(model: Model):
 def loss_values(model: Model):
     """flat params, data -> every loss's value and the metrics (jit-able)."""
 
-    def fn(v, data):
-        params = model.unflatten(v)
-        wi, wo, ref, sqrt_w, cos_i, floor = data
-        f = model.eval(params, wi, wo)
-        out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in L.LOSSES}
-        # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
-        used = (sqrt_w > 0).astype(f.dtype)
-        n = jnp.sum(used) * f.shape[1]
-        d = (f - ref) * used
-        out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-        out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
-        out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
-        out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
-        out["max_abs_error"] = jnp.max(jnp.abs(d))
-        return out
+    def fn(v, data, losses=L.LOSSES):
+        wi, wo = data[0], data[1]
+        return values_metrics(model.eval(model.unflatten(v), wi, wo), data, losses)
 
     return fn
+
+
+def values_metrics(f, data: Data, losses=L.LOSSES) -> dict:
+    """The value of each loss in ``losses`` and the metrics of model values f (N, C) against the
+    data (jit-able). A fit reports its own loss only: the cube root of the ``cbrt`` loss alone
+    cost more than a solver step (XLA's ``pow`` on 2 x 19,683 values, ~1 ms on UBO-81)."""
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in losses}
+    # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
+    used = (sqrt_w > 0).astype(f.dtype)
+    n = jnp.sum(used) * f.shape[1]
+    d = (f - ref) * used
+    out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
+    out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
+    out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
+    out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
+    out["max_abs_error"] = jnp.max(jnp.abs(d))
+    return out
 
 
 def evaluate(model: Model, params, data: Data) -> dict[str, float]:

@@ -30,7 +30,7 @@ from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
 from .cache import cache_enabled, exported
-from .problem import Data, flat_residual, loss_values
+from .problem import Data, flat_residual, values_metrics
 
 #: Solvers that run compiled (and vmap): everything but scipy.
 COMPILED_SOLVERS = SOLVERS[:-1]
@@ -90,12 +90,13 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
     Candidates: the G grid points (linear parameters solved at each) when ``grid``, and the E
     ``given`` starts; the k with the lowest loss on the ``subset`` rows start the solver
     (G + E >= k)."""
-    from .solve import solve_starts  # optimistix: imported only when a program is traced
+    from .solve import fit_constants, result_check as check, solve_starts  # optimistix: imported only when a program is traced
+    from .structure import model_values
 
     vp = _init.vp_grid(model, loss)
     residual = flat_residual(model, loss)
     solve = solve_starts(model, loss, solver, rtol, atol, max_steps)
-    metrics = loss_values(model)
+    model_at = model_values(model)
 
     def run(grid_points, given, data: Data, lo, hi, free, anchor, subset):
         sub = _init.take_rows(data, subset)
@@ -114,9 +115,20 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
         flats, values = jnp.concatenate(flats), jnp.concatenate(values)
         # Stable: among equal losses the grid (listed first) wins.
         starts = flats[jnp.argsort(values, stable=True)[:k]]
-        v, value, code, steps, i, jtj = solve(starts, data, lo, hi, free)
-        return {"v": v, "loss": value, "code": code, "steps": steps, "start": starts[i],
-                "metrics": metrics(v, data), "jtj": jtj}
+        consts = fit_constants(model, loss, data)
+        v, _, code, steps, i, jtj, l0 = solve(starts, data, lo, hi, free, consts)
+        v0 = jnp.clip(starts[i], lo, hi)
+
+        def metrics_at(u):
+            return values_metrics(model_at(u, data, consts[1]), data, (loss,))
+
+        # The result's loss evaluated afresh (the metrics need the model's values anyway) checks
+        # the solver's claim; a point worse than its start (or not finite) gives way to the start.
+        metrics = metrics_at(v)
+        ok, code = check(metrics[loss], l0, v, code, consts[2])
+        metrics = jax.lax.cond(ok, lambda: metrics, lambda: metrics_at(v0))
+        return {"v": jnp.where(ok, v, v0), "loss": metrics[loss], "code": code, "steps": steps, "start": starts[i],
+                "metrics": metrics, "jtj": jnp.where(ok, jtj, jnp.nan)}
 
     return run
 
@@ -127,11 +139,20 @@ def subset_rows(n: int) -> np.ndarray:
     return np.arange(n) if idx is None else idx
 
 
+@functools.lru_cache(maxsize=64)
+def _grid_points(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
+    """``init.grid_for`` once per model and space (the arrays as bytes: hashable)."""
+    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
+    pts = _init.grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
+    pts.flags.writeable = False
+    return pts
+
+
 def program_args(model: Model, space, data: Data, given: np.ndarray, grid: bool = True):
     """The arguments of :func:`fit_program` for one fit in ``space`` (a ``ParameterSpace``)."""
     lo, hi, free = space.lo, space.hi, space.free
     anchor = space.clip(model.default_vector())
-    pts = _init.grid_for(model, lo, hi, free, anchor) if grid else np.zeros((0, 0))
+    pts = _grid_points(model, lo.tobytes(), hi.tobytes(), free.tobytes(), anchor.tobytes()) if grid else np.zeros((0, 0))
     return (pts, np.asarray(given, np.float64).reshape(-1, model.n_free), data, lo, hi, free, anchor,
             subset_rows(data[0].shape[-2]))
 

@@ -39,6 +39,9 @@ class FitResult:
     params: dict[str, np.ndarray]
     loss: str
     loss_value: float
+    #: The fit's loss (under its name, evaluated afresh at the result), "rmse", "log_rmse",
+    #: "rel_rmse", "mean_rel_error", "max_abs_error" (over the used samples, equally weighted).
+    #: Other losses' values: ``brdffit.fitting.problem.evaluate`` (what ``compare`` reports).
     metrics: dict[str, float]
     steps: int
     converged: bool

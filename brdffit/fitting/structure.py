@@ -119,14 +119,13 @@ def normal_equations(model: Model, loss: str):
 
     lin = [k for k, p in enumerate(model.params) if p.linear]
     nonlin = [k for k, p in enumerate(model.params) if not p.linear]
-    starts = np.cumsum([0] + [model.size(p) for p in model.params])
     n_lin = len(lin)
     basis = basis_fn(model)
+    split = _split_vector(model)
 
     def structured(v, data: Data, g_ref=None, geometry=None):
         wi, wo = data[0], data[1]
-        theta = jnp.stack([v[starts[k]] for k in nonlin]) if nonlin else jnp.zeros((0,), v.dtype)
-        lam = jnp.stack([jnp.broadcast_to(v[starts[k] : starts[k + 1]], (C,)) for k in lin])  # (n_lin, C)
+        theta, lam = split(v)
         if geometry is not None:
             F, dF = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)
         else:
@@ -147,6 +146,22 @@ def normal_equations(model: Model, loss: str):
         return _assemble(jnp.asarray(S, v.dtype), J3, r.T)
 
     return structured
+
+
+def _split_vector(model: Model):
+    """v (P,) -> (theta (n_nl,): the non-linear parameters, lam (n_lin, C): the linear ones per
+    channel), both in declared order (a separable model's non-linear parameters are single values)."""
+    lin = [k for k, p in enumerate(model.params) if p.linear]
+    nonlin = [k for k, p in enumerate(model.params) if not p.linear]
+    starts = np.cumsum([0] + [model.size(p) for p in model.params])
+    C = model.channels
+
+    def split(v):
+        theta = jnp.stack([v[starts[k]] for k in nonlin]) if nonlin else jnp.zeros((0,), v.dtype)
+        lam = jnp.stack([jnp.broadcast_to(v[starts[k] : starts[k + 1]], (C,)) for k in lin])
+        return theta, lam
+
+    return split
 
 
 def basis_and_partials(basis, n_nl: int):
@@ -209,6 +224,26 @@ def precompute_geometry(model: Model, data: Data):
         return None
 
 
+@functools.lru_cache(maxsize=None)
+def model_values(model: Model):
+    """(v (P,), data, geometry=None) -> f (N, C): the model's values, by the step's route when the
+    model is :func:`separable` and ``geometry`` (:func:`precompute_geometry`) is given
+    (f = B_0 + B lambda from the direction-only terms: ~0.1 ms on ggx/UBO-81, where
+    ``model.eval`` takes ~1 ms), else ``model.eval``. Equal to ``model.eval`` to rounding (tested)."""
+    n_lin = sum(1 for p in model.params if p.linear)
+    split = _split_vector(model)
+
+    def values(v, data: Data, geometry=None):
+        wi, wo = data[0], data[1]
+        if geometry is None or not separable(model):
+            return model.eval(model.unflatten(v), wi, wo)
+        theta, lam = split(v)
+        F, _ = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)  # partials: dead code
+        return F[:, n_lin][:, None] + (F[:, :n_lin] - F[:, n_lin:]) @ lam
+
+    return values
+
+
 def dense_normal_equations(model: Model, loss: str):
     """The reference: jacfwd over all P entries (what the structured forms must equal)."""
     residual = flat_residual(model, loss)
@@ -226,5 +261,5 @@ def gauss_newton_matrix(model: Model, loss: str):
     return lambda v, data: ne(v, data)[2]
 
 
-__all__ = ["normal_equations", "dense_normal_equations", "gauss_newton_matrix", "compression", "separable"]
+__all__ = ["normal_equations", "model_values", "dense_normal_equations", "gauss_newton_matrix", "compression", "separable"]
 
