@@ -346,11 +346,17 @@ def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: f
     ``consts``: as ``solve_one``; the result is not yet checked (:func:`result_check`).
 
     The best is the lowest loss; the fit is converged when that solve's own test passed."""
-    one = jax.vmap(solve_one(model, loss, solver_name, rtol, atol, max_steps), in_axes=(0, None, None, None, None, None))
+    single = solve_one(model, loss, solver_name, rtol, atol, max_steps)
+    batched = jax.vmap(single, in_axes=(0, None, None, None, None, None))
 
     def run(starts, data, lo, hi, free, consts=None):
         consts = fit_constants(model, loss, data) if consts is None else consts
-        v, value, code, steps, jtj, l0 = one(starts, data, lo, hi, free, consts)
+        if starts.shape[0] == 1:
+            # One start (every single-lobe fit): no batch axis of length 1 in the loop.
+            out = single(starts[0], data, lo, hi, free, consts)
+            v, value, code, steps, jtj, l0 = jax.tree_util.tree_map(lambda a: a[None], out)
+        else:
+            v, value, code, steps, jtj, l0 = batched(starts, data, lo, hi, free, consts)
         key = jnp.where(jnp.isfinite(value) & jnp.all(jnp.isfinite(v), axis=1), value, jnp.inf)
         i = jnp.argmin(key)
         return v[i], value[i], code[i], steps[i], i, jtj[i], l0[i]
