@@ -165,6 +165,8 @@ def _recorded_bounds(bounds, path) -> dict[str, tuple[Any, Any]]:
             raise InputError(path, f"bounds.{name} must be [lower, upper]")
         lo = _number_list(pair[0], f"bounds.{name} lower", path)
         hi = _number_list(pair[1], f"bounds.{name} upper", path)
+        if len(lo) != len(hi) and 1 not in (len(lo), len(hi)):
+            raise InputError(path, f"bounds.{name}: lower has {len(lo)} entries, upper {len(hi)}")
         if any(math.isnan(x) for x in lo + hi) or np.any(np.asarray(lo) > np.asarray(hi)):
             raise InputError(path, f"bounds.{name} is not an interval: {pair}")
         out[name] = (lo if len(lo) > 1 else lo[0], hi if len(hi) > 1 else hi[0])
