@@ -13,6 +13,9 @@ from brdffit.fitting.result import FitResult
 from test_reliability import fit_doc
 
 
+OUTSIDE = "parameter 'kd' = [1.5, 0.2, 0.1] lies outside its recorded bounds"
+
+
 def _read(tmp_path, **changes):
     p = tmp_path / "fit.json"
     p.write_text(json.dumps(fit_doc(**changes)))
@@ -27,10 +30,10 @@ def test_recorded_bounds_forms_accepted(tmp_path, bounds):
 
 
 @pytest.mark.parametrize(("bounds", "message"), [
-    ({"kd": [0, 1]}, "kd' = [1.5, 0.2, 0.1] lies outside its recorded bounds [0, 1]"),
-    ({"kd": {"lower": 0, "upper": 1}}, "lies outside its recorded bounds"),
-    ({"kd": [[0, 0, 0], [2, 0.1, 1]]}, "lies outside its recorded bounds [0, 0, 0, 2, 0.1, 1]"),  # channel 1
-    ({"kd": [0.2, 2]}, "lies outside its recorded bounds"),  # channel 2 below
+    ({"kd": [0, 1]}, f"{OUTSIDE} [0, 1]"),
+    ({"kd": {"lower": 0, "upper": 1}}, f"{OUTSIDE} [0, 1]"),
+    ({"kd": [[0, 0, 0], [2, 0.1, 1]]}, f"{OUTSIDE} [0, 0, 0, 2, 0.1, 1]"),  # channel 1 above
+    ({"kd": [0.2, 2]}, f"{OUTSIDE} [0.2, 2]"),  # channel 2 below
     ([0, 2], "field 'bounds' must be an object name -> [lower, upper]"),
     ({"kd": [0, 2, 3]}, "bounds.kd must be [lower, upper]"),
     ({"kd": {"lower": 0}}, "bounds.kd must be [lower, upper]"),
@@ -46,8 +49,8 @@ def test_recorded_bounds_forms_accepted(tmp_path, bounds):
 def test_malformed_or_violated_recorded_bounds_refused(tmp_path, bounds, message):
     with pytest.raises(InputError) as info:
         _read(tmp_path, params={"kd": [1.5, 0.2, 0.1]}, bounds=bounds)
-    assert str(info.value).startswith(str(tmp_path / "fit.json") + ": ")
-    assert message in str(info.value), str(info.value)
+    assert info.value.path == str(tmp_path / "fit.json")
+    assert info.value.problem.startswith(message), info.value.problem
 
 
 def test_without_a_record_the_models_bounds_apply(tmp_path):
