@@ -23,7 +23,8 @@ def _read(tmp_path, **changes):
 
 
 @pytest.mark.parametrize("bounds", [{"kd": [0, 2]}, {"kd": {"lower": 0, "upper": 2}},
-                                    {"kd": [[0, 0, 0], [2, 1, 1]]}])
+                                    {"kd": [[0, 0, 0], [2, 1, 1]]},
+                                    {"kd": [[1.5, 0.2, 0.1], [1.5, 0.2, 0.1]]}])  # a fixed parameter
 def test_recorded_bounds_forms_accepted(tmp_path, bounds):
     r = _read(tmp_path, params={"kd": [1.5, 0.2, 0.1]}, bounds=bounds)
     assert r.params["kd"].tolist() == [1.5, 0.2, 0.1]
