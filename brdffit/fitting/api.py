@@ -253,8 +253,7 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
         jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
     at_bound = space.at_bound(v)
-    used = prep.used if prep.used is not None else np.asarray(measurement.valid_mask(), dtype=bool)
-    wo = np.asarray(measurement.wo)[used]
+    wo = np.asarray(measurement.wo)[prep.used]
     warnings = fit_warnings(space, v, at_bound, stderr, sample_spacing(wo))
     status = STATUS_TEXT[code]
     if solver == "scipy" and code == 0:

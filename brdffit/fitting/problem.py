@@ -42,7 +42,7 @@ class Prepared:
     n_excluded: int
     excluded: dict[str, int]  # reason -> count (a sample may have several reasons)
     channels: int
-    used: np.ndarray | None = None  # (N,) bool: the samples the fit uses
+    used: np.ndarray  # (N,) bool: the samples the fit uses
 
 
 def resolve_model(model, channels: int) -> Model:
@@ -62,11 +62,6 @@ def _exclusions(values, w, wi, wo) -> dict[str, np.ndarray]:
         "light below horizon": ~(wi[:, 2] > 0),
         "view below horizon": ~(wo[:, 2] > 0),
     }
-
-
-def exclusion_reasons(m: Measurement) -> dict[str, int]:
-    out = _exclusions(np.asarray(m.values), np.asarray(m.weights), np.asarray(m.wi), np.asarray(m.wo))
-    return {k: int(np.sum(v)) for k, v in out.items()}
 
 
 def prepare(m: Measurement, weights=None) -> Prepared:

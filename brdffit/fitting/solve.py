@@ -273,9 +273,8 @@ def result_check(value, l0, v, code, loss_floor):
 
 
 def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free, consts=None) -> (v, loss,
-    code, steps, J^T J at v, loss at v0); ``consts``: :func:`fit_constants` of the data (computed
-    when None). The caller checks the result (:func:`result_check`, done by ``program.fit_program``
+    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free, consts) -> (v, loss, code,
+    steps, J^T J at v, loss at v0); ``consts``: :func:`fit_constants` of the data. The caller checks the result (:func:`result_check`, done by ``program.fit_program``
     on the best start's result, with the loss evaluated afresh for the metrics anyway)."""
     from .structure import gauss_newton_matrix, model_values, normal_equations
 
@@ -294,8 +293,7 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
         # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
         solver = make_solver("lm", rtol, atol, normal_equations=lambda y, a: ne(y, *a))
 
-        def run(v0, data, lo, hi, free, consts=None):
-            consts = fit_constants(model, loss, data) if consts is None else consts
+        def run(v0, data, lo, hi, free, consts):
             v0 = jnp.clip(v0, lo, hi)
             g_ref, geometry, floor_loss = consts
             sol = optx.least_squares(lambda v, a: fn(v, a[0]), solver, v0, args=(data, g_ref, geometry),
@@ -311,14 +309,13 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
     solver = make_solver(solver_name, rtol, atol)
     jtj = gauss_newton_matrix(model, loss)
 
-    def run(v0, data, lo, hi, free, consts=None):
+    def run(v0, data, lo, hi, free, consts):
         """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
 
         Why: optimistix's Levenberg-Marquardt damps with lambda * I starting at 1, its dogleg
         starts with a unit trust radius and BFGS with an identity Hessian; our Jacobian columns
         span 1e-3..1e2, and unscaled they spent 60-160 steps reaching the Gauss-Newton regime.
         Jacobi scaling makes lambda * I act like Marquardt's damping."""
-        consts = fit_constants(model, loss, data) if consts is None else consts
         v0 = jnp.clip(v0, lo, hi)
         x0 = from_box(v0, lo, hi)
 
@@ -341,7 +338,7 @@ def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: floa
 
 
 def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """run(starts (K, P), data, lo, hi, free, consts=None) -> the best of K solves (one vmapped
+    """run(starts (K, P), data, lo, hi, free, consts) -> the best of K solves (one vmapped
     solve): (v, loss, code, steps, index of the start, J^T J at v, loss at the start).
     ``consts``: as ``solve_one``; the result is not yet checked (:func:`result_check`).
 
@@ -349,8 +346,7 @@ def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: f
     single = solve_one(model, loss, solver_name, rtol, atol, max_steps)
     batched = jax.vmap(single, in_axes=(0, None, None, None, None, None))
 
-    def run(starts, data, lo, hi, free, consts=None):
-        consts = fit_constants(model, loss, data) if consts is None else consts
+    def run(starts, data, lo, hi, free, consts):
         if starts.shape[0] == 1:
             # One start (every single-lobe fit): no batch axis of length 1 in the loop.
             out = single(starts[0], data, lo, hi, free, consts)

@@ -130,8 +130,7 @@ def normal_equations(model: Model, loss: str):
             F, dF = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)
         else:
             F, dF = basis_and_partials(basis, len(nonlin))(theta, wi, wo)
-        B0, B = F[:, n_lin], F[:, :n_lin] - F[:, n_lin:]
-        f = B0[:, None] + B @ lam  # (N, C)
+        f, B = _from_basis(F, lam, n_lin)
         r, slope = _residual_and_slope(loss, f, data, g_ref)
         cols = [None] * len(model.params)
         wT = slope.T  # (C, N)
@@ -162,6 +161,13 @@ def _split_vector(model: Model):
         return theta, lam
 
     return split
+
+
+def _from_basis(F, lam, n_lin: int):
+    """f (N, C) = B_0 + B lam from the basis F (N, n_lin + 1) of :func:`basis_fn` and the linear
+    parameters lam (n_lin, C); also returns B (N, n_lin)."""
+    B = F[:, :n_lin] - F[:, n_lin:]
+    return F[:, n_lin][:, None] + B @ lam, B
 
 
 def basis_and_partials(basis, n_nl: int):
@@ -239,7 +245,7 @@ def model_values(model: Model):
             return model.eval(model.unflatten(v), wi, wo)
         theta, lam = split(v)
         F, _ = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)  # partials: dead code
-        return F[:, n_lin][:, None] + (F[:, :n_lin] - F[:, n_lin:]) @ lam
+        return _from_basis(F, lam, n_lin)[0]
 
     return values
 
