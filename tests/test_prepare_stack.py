@@ -24,16 +24,35 @@ def test_equals_prepare_of_each_texel():
     weights[:20] = 0.0
     wo = wo.copy()
     wo[30, 2] = -0.1  # a view below the horizon
+    wi = wi.copy()
+    wi[40] = (1.0, 0.0, 0.0)  # a light exactly on the horizon: excluded, as below it
+    wo[50] = (0.0, 1.0, 0.0)  # a view exactly on the horizon
     got = prepare_stack(values, wi, wo, weights)
     for k in range(n):
         want = prepare(brdffit.Measurement(wi, wo, values[k], weights=weights, name=f"t{k}")).data
         for a, b in zip(got, want):
             np.testing.assert_allclose(a[k], np.asarray(b), rtol=1e-15, atol=0)
+    assert np.all(got[3][:, [30, 40, 50]] == 0.0)  # sqrt_w: excluded samples weigh nothing
+
+
+def test_float32_inputs_give_the_float64_arrays_of_prepare():
+    """A BTF tile arrives as float32 (EXR halves/floats); the fit runs in float64 like ``prepare``."""
+    wi, wo = ubo_pairs()
+    values = np.random.default_rng(2).uniform(0.0, 2.0, (2, len(wi), 3))
+    f32 = [np.asarray(a, np.float32) for a in (values, wi, wo, np.ones(len(wi)))]
+    got = prepare_stack(*f32)
+    want = prepare(brdffit.Measurement(*(np.asarray(a, np.float64) for a in f32[1:3]), np.asarray(f32[0][1], np.float64),
+                                       name="t1")).data
+    for a, b in zip(got, want):
+        assert a.dtype == np.float64
+        np.testing.assert_allclose(a[1], np.asarray(b), rtol=1e-15, atol=0)
 
 
 def test_a_texel_without_valid_samples_is_a_usage_error():
     wi, wo = ubo_pairs()
     values = np.ones((2, len(wi), 3))
     values[1] = np.nan
-    with pytest.raises(UsageError, match=r"tile\[1\]: no valid samples"):
+    with pytest.raises(UsageError) as caught:
         prepare_stack(values, wi, wo, np.ones(len(wi)), name="tile")
+    assert str(caught.value) == ("tile[1]: no valid samples to fit (all have weight 0, non-finite values or lie "
+                                 "below the horizon)")

@@ -156,10 +156,6 @@ class ParameterSpace:
         v = np.clip(np.asarray(v, dtype=np.float64), self.lo, self.hi)
         return np.where(self.free, v, self.values)
 
-    def contains(self, v, atol: float = 0.0) -> bool:
-        v = np.asarray(v, dtype=np.float64)
-        return bool(np.all(v >= self.lo - atol) and np.all(v <= self.hi + atol))
-
     def canonical(self, v) -> np.ndarray:
         """``v`` with the lobes of every interchangeable group sorted narrowest first (whole lobes
         swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
