@@ -17,7 +17,7 @@ from brdffit import models
 from brdffit.cli import main
 from brdffit.errors import UsageError
 from brdffit.fitting import FitResult, fit
-from brdffit.fitting.space import ParameterSpace, fit_warnings, sample_spacing
+from brdffit.fitting.space import ParameterSpace, fit_warnings, lobe_halfwidths, sample_spacing
 from brdffit.grid import spherical_to_cartesian, ubo_directions, ubo_pairs
 from brdffit.models.base import format_range
 
@@ -267,3 +267,31 @@ def test_fit_batch_takes_the_same_space():
     # f0 is shared by the channels: raising it lets two of them stay below the cap.
     assert list(rp.at_bound) == ["ks"] and rp.at_bound["ks"].startswith("upper")
     assert np.all(rp.params["ks"] <= 1.0) and np.isclose(rp.params["ks"], 1.0).any()
+
+
+def test_warning_sentences_name_the_lobe_and_the_bound():
+    """The sentences of ``fit_warnings``, in full: a composite names its lobe by prefix, a single
+    lobe by kind; the width is twice the half width at half maximum; a bound says where it comes
+    from; an undetermined parameter says so."""
+    spacing = math.radians(14.5)
+    composite = models.get("lambert+ggx+ggx")
+    space = ParameterSpace.build(composite, bounds={"ggx2.ks": (0.0, 2.0)})
+    v = composite.flatten({"kd": [0.2] * 3, "ggx1.ks": [0.5] * 3, "ggx1.alpha": [0.03], "ggx1.f0": [0.1],
+                           "ggx2.ks": [2.0] * 3, "ggx2.alpha": [0.4], "ggx2.f0": [0.1]})
+    at_bound = space.at_bound(v)
+    assert at_bound == {"ggx2.ks": "upper"}
+    got = fit_warnings(space, v, at_bound, {"kd": None, "ggx1.f0": np.ones(1)}, spacing)
+    (hw,) = [h for lobe, h in lobe_halfwidths(composite, v) if lobe.params[0] == "ggx1.ks"]
+    assert got == [
+        "ggx2.ks ended on its upper bound 2 (set by bounds=).",
+        f"lobe ggx1 is narrower than the sample spacing (width {math.degrees(2 * hw):.2g} degrees at half maximum, "
+        "samples 14.5 degrees apart): the samples see little more than its peak, so its width and scale are "
+        "poorly determined.",
+        "kd is not determined by the data (it trades off against other parameters; no standard error).",
+    ]
+    single = models.get("ggx")
+    v1 = single.flatten({"kd": [0.2] * 3, "ks": [0.5] * 3, "alpha": [0.03], "f0": [0.1]})
+    (line,) = fit_warnings(ParameterSpace.build(single), v1, {}, {}, spacing)
+    assert line.startswith("the ggx lobe is narrower than the sample spacing (width ")
+    # The narrow-lobe test is on the full width: 2 x the half width, not the half width itself.
+    assert fit_warnings(ParameterSpace.build(single), v1, {}, {}, 2 * hw - 1e-9) == []
