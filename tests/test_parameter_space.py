@@ -124,6 +124,8 @@ def test_canonical_swaps_whole_lobes_and_keeps_f():
     wi, wo = ubo_pairs()
     np.testing.assert_allclose(m.eval(c, wi, wo), m.eval(p, wi, wo), rtol=1e-13)
     np.testing.assert_array_equal(s.canonical(s.canonical(v)), s.canonical(v))
+    # float64 out whatever comes in (a float32 vector from a user's own code included)
+    assert s.canonical(v.astype(np.float32)).dtype == np.float64
     # A fixed parameter tells the lobes apart: no swap (it would move the fixed value).
     held = ParameterSpace.build(m, fixed={"ggx2.f0": 0.9})
     np.testing.assert_array_equal(held.canonical(v), v)
@@ -295,3 +297,15 @@ def test_warning_sentences_name_the_lobe_and_the_bound():
     assert line.startswith("the ggx lobe is narrower than the sample spacing (width ")
     # The narrow-lobe test is on the full width: 2 x the half width, not the half width itself.
     assert fit_warnings(ParameterSpace.build(single), v1, {}, {}, 2 * hw - 1e-9) == []
+
+
+@pytest.mark.parametrize("given, message", [
+    ({"bounds": {"alpha": ("a", 1.0)}}, "lower bound for 'alpha': 'a' is not a number"),
+    ({"bounds": {"alpha": (0.1, [1])}}, "upper bound for 'alpha': [1] is not a number"),
+    ({"fixed": {"f0": None}}, "fixed value for 'f0': None is not a number"),
+    ({"fixed": {"f0": float("nan")}}, "fixed value for 'f0': NaN is not a value"),
+])
+def test_a_value_that_is_not_a_number_is_named(given, message):
+    with pytest.raises(UsageError) as caught:
+        ParameterSpace.build(models.get("ggx"), **given)
+    assert str(caught.value) == message

@@ -157,8 +157,8 @@ class ParameterSpace:
         return np.where(self.free, v, self.values)
 
     def canonical(self, v) -> np.ndarray:
-        """``v`` with the lobes of every interchangeable group sorted narrowest first (whole lobes
-        swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
+        """``v`` (float64) with the lobes of every interchangeable group sorted narrowest first
+        (whole lobes swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
         v = np.asarray(v, dtype=np.float64)
         return v[self.canonical_order(v)]
 
