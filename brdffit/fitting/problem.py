@@ -58,10 +58,27 @@ def _exclusions(values, w, wi, wo) -> dict[str, np.ndarray]:
     is their complement)."""
     return {
         "weight 0": ~(w > 0),
-        "non-finite value": ~np.all(np.isfinite(values), axis=1),
+        "non-finite value": ~_rows_all(np.isfinite(values)),
         "light below horizon": ~(wi[:, 2] > 0),
         "view below horizon": ~(wo[:, 2] > 0),
     }
+
+
+def _rows_all(a: np.ndarray) -> np.ndarray:
+    """``np.all(a, axis=1)`` of an (N, C) bool array with few columns, a column at a time: NumPy's
+    reduction over a short last axis is ~4x slower (measured: 179 against 40 us on 6,561 x 3)."""
+    out = a[:, 0].copy()
+    for c in range(1, a.shape[1]):
+        out &= a[:, c]
+    return out
+
+
+def _rows_replaced(a: np.ndarray, keep: np.ndarray, stand_in) -> np.ndarray:
+    """``np.where(keep[:, None], a, stand_in)`` as a copy with the few excluded rows overwritten
+    (the broadcasting ``np.where`` took 160 us on 6,561 x 3, this 24 us)."""
+    out = np.array(a, dtype=np.float64)
+    out[~keep] = stand_in
+    return out
 
 
 def prepare(m: Measurement, weights=None) -> Prepared:
@@ -85,16 +102,17 @@ def prepare(m: Measurement, weights=None) -> Prepared:
         raise UsageError(f"{m.name}: no valid samples to fit (all have weight 0, non-finite values or lie below the horizon)")
     c = values.shape[1]
     up = np.array([0.0, 0.0, 1.0])
-    m2 = mask[:, None]
-    wi = np.where(m2, wi, up)
-    wo = np.where(m2, wo, up)
-    ref = np.where(m2, values, 0.0)  # the mask holds finite rows only
+    wi = _rows_replaced(wi, mask, up)
+    wo = _rows_replaced(wo, mask, up)
+    ref = _rows_replaced(values, mask, 0.0)  # the mask holds finite rows only
     w = np.where(mask, w, 0.0)
     w_sum = w.sum()
     # Normalise: sum of squared residuals = weighted mean over samples and channels.
     sqrt_w = np.sqrt(w / (w_sum * c))[:, None]
     cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
-    mean_abs = (np.abs(ref) * w[:, None]).sum(axis=0) / w_sum  # as prepare_stack (tested equal)
+    # as prepare_stack (tested equal to the last bit: the same einsum loop, no BLAS threads that could
+    # change the order of the sum); 2.5x faster than multiplying and summing
+    mean_abs = np.einsum("n,nc->c", w, np.abs(ref)) / w_sum
     # Relative to the data (see losses: a table scaled by 1e-12 fits as the original).
     floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
     reasons = {k: n for k, n in ((k, int(v.sum())) for k, v in excluded.items()) if n}
@@ -127,7 +145,7 @@ def prepare_stack(values, wi, wo, weights, name: str = "batch") -> Data:
     total = w.sum(axis=1, keepdims=True)
     sqrt_w = np.sqrt(w / (total * c))[:, :, None]
     cos_i = np.clip(wi_s[:, :, 2:3], 1e-7, 1.0)
-    mean_abs = (np.abs(ref) * w[:, :, None]).sum(axis=1) / total
+    mean_abs = np.einsum("kn,knc->kc", w, np.abs(ref)) / total  # as prepare (tested equal to the last bit)
     floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
     return Data(wi_s, wo_s, ref, sqrt_w, cos_i, floor)
 
