@@ -18,7 +18,8 @@ compiled program time (start, solve, metrics) and steps, and what one step compu
 J^T J) timed next to its FLOP count (XLA's cost analysis), structured (the solver's) and dense. Then the
 wall time of ``brdffit fit data/sample_ubo81.exr --model ggx -o DIR`` in a first process (empty
 compile cache) and a second one (target <= 2.5 s). Times are medians of ``--repeat`` runs after
-a warm-up; ratios are within one run (the machine may be shared).
+a warm-up (the best times' ratio to the hand-written fit is printed beside the medians'); ratios
+are within one run (the machine may be shared).
 
 ``--batch N``: ``fit_batch`` on N ggx UBO-81 texels (synthetic, 1 % noise): fits per second.
 """
@@ -107,7 +108,7 @@ def timed(fn, repeat):
         t0 = time.perf_counter()
         out = fn()
         times.append(time.perf_counter() - t0)
-    return out, statistics.median(times)
+    return out, statistics.median(times), min(times)
 
 
 def step_cost(meas, model_name: str, repeat: int = 200) -> dict:
@@ -163,34 +164,40 @@ def main(argv=None) -> int:
         for _ in range(WARMUP - 1):
             hand_written(meas)
         hw_loss, hw_s, sol = hand_written(meas)
-        hw_s = statistics.median([hw_s] + [hand_written(meas)[1] for _ in range(args.repeat - 1)])
-        sc, sc_s = timed(lambda: brdffit.fit(meas, "ggx", solver="scipy", init=START), args.repeat)
-        d, d_s = timed(lambda: brdffit.fit(meas, "ggx"), args.repeat)
+        hw_times = [hw_s] + [hand_written(meas)[1] for _ in range(args.repeat - 1)]
+        hw_s, hw_best = statistics.median(hw_times), min(hw_times)
+        sc, sc_s, _ = timed(lambda: brdffit.fit(meas, "ggx", solver="scipy", init=START), args.repeat)
+        d, d_s, d_best = timed(lambda: brdffit.fit(meas, "ggx"), args.repeat)
         comp = None
         if meas.grid == "ubo81":
-            comp, comp_s = timed(lambda: brdffit.fit(meas, "lambert+ggx+ggx"), args.repeat)
+            comp, comp_s, _ = timed(lambda: brdffit.fit(meas, "lambert+ggx+ggx"), args.repeat)
+        # Medians are what the targets are judged on; the best times (timeit's convention: the
+        # least disturbed run of each) are printed beside them, since the hand-written fit's
+        # median moves by 1.5x between runs on a shared machine.
         row = dict(name=meas.name, rgl=meas.grid == "ubo81", hw=hw_loss, sc=sc.loss_value, d=d.loss_value, hw_s=hw_s, sc_s=sc_s, d_s=d_s,
+                   best_ratio=hw_best / d_best,
                    steps=d.steps, status=d.status, program_s=d.seconds["run"],
                    comp=comp, comp_s=comp_s if comp else None)
         rows.append(row)
         print(f"{meas.name:26s} loss hand {hw_loss:.6e} scipy-jit {sc.loss_value:.6e} default {d.loss_value:.6e} "
               f"ratio {d.loss_value / hw_loss:.5f} | warm hand {hw_s * 1e3:.1f} ms ({sol.nfev} evals) scipy-jit "
               f"{sc_s * 1e3:.1f} ms default {d_s * 1e3:.1f} ms (compiled program {d.seconds['run'] * 1e3:.1f} ms, "
-              f"{d.steps} steps, {d.status}) speed-up x{hw_s / d_s:.1f} / x{sc_s / d_s:.1f}"
+              f"{d.steps} steps, {d.status}) speed-up x{hw_s / d_s:.1f} / x{sc_s / d_s:.1f} (best times: "
+              f"hand {hw_best * 1e3:.1f} ms, default {d_best * 1e3:.1f} ms, x{hw_best / d_best:.1f})"
               + (f" | lambert+ggx+ggx {comp.status}, loss/hand {comp.loss_value / hw_loss:.4f}, "
                  f"{comp_s * 1e3:.0f} ms, {comp.steps} steps" if comp else ""), flush=True)
     step = step_cost(brdffit.load(REPO / "data" / "sample_ubo81.exr"), "ggx")
 
     print()
     hdr = ("material", "loss default/hand", "loss scipy-jit/hand", "hand ms", "scipy-jit ms", "default ms",
-           "x vs hand", "x vs scipy-jit", "steps", "program ms", "l+g+g converged", "l+g+g loss/hand ggx", "l+g+g ms")
+           "x vs hand", "x vs hand (best times)", "x vs scipy-jit", "steps", "program ms", "l+g+g converged", "l+g+g loss/hand ggx", "l+g+g ms")
     print(" | ".join(hdr))
     print(" | ".join("---" for _ in hdr))
     fails = []
     for r in rows:
         c = r["comp"]
         print(f"{r['name']} | {r['d'] / r['hw']:.5f} | {r['sc'] / r['hw']:.5f} | {r['hw_s'] * 1e3:.1f} | "
-              f"{r['sc_s'] * 1e3:.1f} | {r['d_s'] * 1e3:.1f} | {r['hw_s'] / r['d_s']:.1f} | {r['sc_s'] / r['d_s']:.1f} | "
+              f"{r['sc_s'] * 1e3:.1f} | {r['d_s'] * 1e3:.1f} | {r['hw_s'] / r['d_s']:.1f} | {r['best_ratio']:.1f} | {r['sc_s'] / r['d_s']:.1f} | "
               f"{r['steps']} | {r['program_s'] * 1e3:.1f} | " + (f"{c.converged} | {c.loss_value / r['hw']:.10f} | "
                                                                 f"{r['comp_s'] * 1e3:.0f}" if c else "- | - | -"))
         if r["d"] > 1.001 * r["hw"]:
