@@ -15,8 +15,9 @@ from brdffit.grid import ubo_pairs
 def test_equals_prepare_of_each_texel():
     wi, wo = ubo_pairs()
     rng = np.random.default_rng(5)
-    n, N = 4, len(wi)
+    n, N = 5, len(wi)
     values = rng.uniform(0.0, 2.0, (n, N, 3))
+    values[4] = 0.0  # a black texel: its floor is the tiny positive stand-in, not 0
     values[1, 10] = np.nan  # one texel with a non-finite sample
     values[2, :, 1] *= 1e-6  # another with a dim channel (its own floor)
     values[3, 5:2000] = np.inf  # many excluded: its weights sum differs from the others
@@ -26,6 +27,7 @@ def test_equals_prepare_of_each_texel():
     wo[30, 2] = -0.1  # a view below the horizon
     wi = wi.copy()
     wi[40] = (1.0, 0.0, 0.0)  # a light exactly on the horizon: excluded, as below it
+    wi[60] = (np.sqrt(1.0 - 1e-18), 0.0, 1e-9)  # a grazing light: used, its cosine clipped to 1e-7
     wo[50] = (0.0, 1.0, 0.0)  # a view exactly on the horizon
     got = prepare_stack(values, wi, wo, weights)
     for k in range(n):
