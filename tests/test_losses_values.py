@@ -107,3 +107,32 @@ def test_loss_names():
     assert str(caught.value) == "unknown loss 'nope'; known: l2, cosine_l2, log, cbrt, relative"
     with pytest.raises(ValueError):
         L.transform("nope", F, COS, FLOOR)
+
+
+def test_fit_metrics_against_sums_written_out():
+    """``problem.values_metrics`` (every FitResult's metrics): rmse, log_rmse, rel_rmse,
+    mean_rel_error and max_abs_error over the used samples (sqrt_w > 0), equally weighted, and
+    each loss as the sum of its squared residuals. Sample 2 is unused and far off: it must not count."""
+    from brdffit.fitting.problem import Data, values_metrics
+
+    f = np.array([[0.5, 3.0], [2.0, -0.2], [100.0, 100.0]])
+    ref = np.array([[0.25, 1.0], [-0.1, 0.4], [0.0, 0.0]])
+    cos = np.array([[0.5], [0.8], [0.9]])
+    sqrt_w = np.array([[2.0], [3.0], [0.0]])
+    wi = wo = np.tile([0.0, 0.0, 1.0], (3, 1))
+    got = {k: float(v) for k, v in values_metrics(f, Data(wi, wo, ref, sqrt_w, cos, FLOOR), tuple(WANT)).items()}
+    used = [(i, c) for i in range(2) for c in range(2)]
+    d = {ic: f[ic] - ref[ic] for ic in used}
+    want = {
+        "rmse": math.sqrt(sum(x * x for x in d.values()) / 4),
+        "log_rmse": math.sqrt(sum((math.log1p(f[i, c] * cos[i, 0]) - math.log1p(ref[i, c] * cos[i, 0])) ** 2
+                                  for i, c in used) / 4),
+        "rel_rmse": math.sqrt(sum(x * x for x in d.values()) / sum(ref[ic] ** 2 for ic in used)),
+        "mean_rel_error": sum(abs(d[(i, c)]) / (abs(ref[i, c]) + FLOOR[c]) for i, c in used) / 4,
+        "max_abs_error": max(abs(x) for x in d.values()),
+    }
+    for loss, fn in WANT.items():
+        want[loss] = sum((SQRT_W[i, 0] * fn(i, c)) ** 2 for i, c in used)
+    assert got.keys() == want.keys()
+    for k in want:
+        assert got[k] == pytest.approx(want[k], rel=1e-12), k
