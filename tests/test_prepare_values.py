@@ -72,6 +72,9 @@ def test_extra_weights_multiply_and_exclude():
     extra = np.array([2.0, 0.0, 1.0, 1.0, 1.0, 1.0])  # sample 1 dropped by the caller (a scene's usage)
     p = prepare(m, extra)
     assert p.used.tolist() == [True, False, False, False, False, False] and p.n_used == 1
+    # every left-out sample has its reason, the caller's weights included
+    assert p.excluded == {"weight 0": 1, "non-finite value": 1, "light below horizon": 1, "view below horizon": 1,
+                          "weight 0 in weights=": 1} and p.n_excluded == 5
     assert float(np.asarray(p.data[3])[0, 0]) == pytest.approx(math.sqrt(2.0 / (2.0 * 2)), rel=1e-15)
     for bad in (np.nan, np.inf):  # a non-finite extra weight excludes its sample
         odd = extra.copy()

@@ -96,7 +96,9 @@ def prepare(m: Measurement, weights=None) -> Prepared:
         if extra.shape != w.shape:
             raise UsageError(f"weights has shape {extra.shape}, expected {w.shape}")
         w = w * extra
-        mask &= np.isfinite(extra) & (extra > 0)
+        # counted by reason like the Measurement's own exclusions (a scene that never looks there)
+        excluded["weight 0 in weights="] = ~(np.isfinite(extra) & (extra > 0))
+        mask &= ~excluded["weight 0 in weights="]
     n_used = int(mask.sum())
     if n_used == 0:
         raise UsageError(f"{m.name}: no valid samples to fit (all have weight 0, non-finite values or lie below the horizon)")
