@@ -96,19 +96,48 @@ def test_space_resolution_and_errors():
     s = ParameterSpace.build(m, bounds={"ggx2.alpha": (0.01, None)}, fixed={"ggx1.f0": 0.04}, physical=True)
     flat = dict(zip(m.param_names, np.cumsum([0] + [m.size(p) for p in m.params])))
     assert s.hi[flat["kd"]] == 1.0  # physical
-    assert (s.lo[flat["ggx2.alpha"]], s.hi[flat["ggx2.alpha"]]) == (0.01, INF)  # override, None keeps the bound
+    # override; None keeps the bound in force (SPEC 5: bounds= overrides a bound): here the physical 1.0
+    assert (s.lo[flat["ggx2.alpha"]], s.hi[flat["ggx2.alpha"]]) == (0.01, 1.0)
     assert not s.free[flat["ggx1.f0"]] and s.lo[flat["ggx1.f0"]] == s.hi[flat["ggx1.f0"]] == 0.04
     assert s.order == ()  # ggx1 and ggx2 are told apart by the user's constraints: no swapping
-    for bounds, fixed, match in (
-        ({"nosuch": (0, 1)}, None, "no parameter 'nosuch'"),
-        ({"ggx1.alpha": (0.5, 0.1)}, None, "above upper"),
-        ({"ggx1.alpha": (0.0, 0.1)}, None, "formula allows"),
-        ({"ggx1.alpha": (float("nan"), 0.1)}, None, "NaN"),
-        (None, {"ggx1.f0": 1.5}, "outside its bounds"),
-        (None, {"kd": [0.1, 0.2]}, "1 or 3 numbers"),
-    ):
-        with pytest.raises(UsageError, match=match):
-            ParameterSpace.build(m, bounds, fixed)
+    # The edges are allowed: a box equal to the formula's range, a value fixed on a bound, and a
+    # box wider than the physical range.
+    edge = ParameterSpace.build(m, bounds={"ggx1.alpha": (1e-4, INF), "kd": (None, 2.0), "ggx2.alpha": (0.3, 0.3)},
+                                fixed={"ggx2.f0": 1.0, "ggx1.f0": 0.0}, physical=True)
+    assert (edge.lo[flat["ggx1.alpha"]], edge.hi[flat["ggx1.alpha"]]) == (1e-4, INF)
+    assert edge.lo[flat["kd"]] == 0.0 and edge.hi[flat["kd"]] == 2.0
+    assert edge.values[flat["ggx2.f0"]] == 1.0 and edge.values[flat["ggx1.f0"]] == 0.0
+    assert edge.lo[flat["ggx2.alpha"]] == edge.hi[flat["ggx2.alpha"]] == 0.3  # an empty box is allowed
+    # None keeps that side of the box in force: the physical one with physical=True
+    for physical, upper in ((True, 1.0), (False, INF)):
+        narrowed = ParameterSpace.build(m, bounds={"ggx1.ks": (0.1, None)}, physical=physical)
+        assert narrowed.lo[flat["ggx1.ks"]] == 0.1 and narrowed.hi[flat["ggx1.ks"]] == upper
+
+
+NAMES = "kd, ggx1.ks, ggx1.alpha, ggx1.f0, ggx2.ks, ggx2.alpha, ggx2.f0"
+
+
+@pytest.mark.parametrize("bounds, fixed, message", [
+    ({"nosuch": (0, 1)}, None, f"bounds: model 'lambert+ggx+ggx' has no parameter 'nosuch'; it has {NAMES}"),
+    (None, {"nosuch": 1}, f"fixed: model 'lambert+ggx+ggx' has no parameter 'nosuch'; it has {NAMES}"),
+    ({"ggx1.alpha": (0.5, 0.1)}, None, "bounds for 'ggx1.alpha': lower 0.5 is above upper 0.1"),
+    ({"ggx1.alpha": (0.0, 0.1)}, None,
+     "bounds for 'ggx1.alpha': (0, 0.1) leaves the range the formula allows, [0.0001, inf]"),
+    ({"ggx1.f0": (None, 2.0)}, None, "bounds for 'ggx1.f0': (0, 2) leaves the range the formula allows, [0, 1]"),
+    ({"ggx1.alpha": (float("nan"), 0.1)}, None, "lower bound for 'ggx1.alpha': NaN is not a value"),
+    ({"kd": 0.5}, None, "bounds for 'kd': expected (lower, upper), got 0.5"),
+    ({"kd": "ab"}, None, "bounds for 'kd': expected (lower, upper), got 'ab'"),
+    ({"kd": (0.1, 0.2, 0.3)}, None, "bounds for 'kd': expected (lower, upper), got (0.1, 0.2, 0.3)"),
+    (None, {"ggx1.f0": 1.5}, "fixed value for 'ggx1.f0': 1.5 outside its bounds [0, 1]"),
+    (None, {"ggx1.f0": -0.1}, "fixed value for 'ggx1.f0': -0.1 outside its bounds [0, 1]"),
+    ({"ggx1.f0": (0.2, 0.5)}, {"ggx1.f0": 0.6}, "fixed value for 'ggx1.f0': 0.6 outside its bounds [0.2, 0.5]"),
+    (None, {"kd": [0.1, 0.2]}, "fixed value for 'kd': expected 1 or 3 numbers, got [0.1, 0.2]"),
+    (None, {"kd": [[0.1]]}, "fixed value for 'kd': expected 1 or 3 numbers, got [[0.1]]"),
+])
+def test_space_refusals_in_full(bounds, fixed, message):
+    with pytest.raises(UsageError) as caught:
+        ParameterSpace.build(models.get("lambert+ggx+ggx"), bounds, fixed)
+    assert str(caught.value) == message
 
 
 def test_canonical_swaps_whole_lobes_and_keeps_f():

@@ -6,7 +6,7 @@
    ``brdffit.models.base``);
 2. with ``physical=True``, the declared physical range instead (finite, plausible);
 3. ``bounds={"name": (lo, hi)}``: the user's box for that parameter (replaces 1 and 2; ``None`` on
-   a side keeps it). It must lie inside the declared bounds -- outside them the formula is not
+   a side keeps that side of 1, or of 2 with ``physical=True``). It must lie inside the declared bounds -- outside them the formula is not
    defined or not finite -- and it may be wider than the physical range;
 4. ``fixed={"name": value}``: the parameter is held at ``value`` (a scalar, or one value per
    channel); the value must lie inside the declared bounds and any ``bounds=`` given for it
@@ -98,8 +98,9 @@ class ParameterSpace:
             s = slices[name]
             if isinstance(box, str) or not hasattr(box, "__len__") or len(box) != 2:
                 raise UsageError(f"bounds for {name!r}: expected (lower, upper), got {box!r}")
-            a = lo_decl[s][0] if box[0] is None else _number(name, "lower bound", box[0])
-            b = hi_decl[s][0] if box[1] is None else _number(name, "upper bound", box[1])
+            # None keeps that side of the box as resolved so far (the physical one with physical=True)
+            a = lo[s][0] if box[0] is None else _number(name, "lower bound", box[0])
+            b = hi[s][0] if box[1] is None else _number(name, "upper bound", box[1])
             if a > b:
                 raise UsageError(f"bounds for {name!r}: lower {a:g} is above upper {b:g}")
             if a < lo_decl[s][0] or b > hi_decl[s][0]:
