@@ -338,3 +338,33 @@ def test_a_value_that_is_not_a_number_is_named(given, message):
     with pytest.raises(UsageError) as caught:
         ParameterSpace.build(models.get("ggx"), **given)
     assert str(caught.value) == message
+
+
+def test_at_bound_per_channel_and_its_tolerance():
+    """A parameter counts as on a finite bound within AT_BOUND_RTOL (1e-6) of its box's width (of
+    its finite_range where the box is infinite); per channel where only some channels are; never
+    for a held parameter or an infinite bound; and where each bound comes from, for the warnings."""
+    g = models.get("ggx")
+    space = ParameterSpace.build(g, bounds={"ks": (0.0, 2.0)}, fixed={"f0": 0.5}, physical=True)
+    width = 2.0  # ks's box
+    v = g.flatten({"kd": [0.0, 0.5, 1.0], "ks": [0.9e-6 * width, 0.5, 2.0 - 0.9e-6 * width],
+                   "alpha": [0.5], "f0": [0.5]})
+    assert space.at_bound(v) == {"kd": "lower in channel 0; upper in channel 2",
+                                 "ks": "lower in channel 0; upper in channel 2"}
+    off = g.flatten({"kd": [0.5, 0.5, 0.5], "ks": [1.1e-6 * width, 1.0, 2.0 - 1.1e-6 * width],
+                     "alpha": [1.0], "f0": [0.5]})
+    assert space.at_bound(off) == {"alpha": "upper"}  # ks just outside the tolerance; f0 held
+    both = g.flatten({"kd": [1.0, 1.0, 0.0], "ks": [0.0, 0.0, 0.0], "alpha": [0.5], "f0": [0.5]})
+    assert space.at_bound(both) == {"kd": "lower in channel 2; upper in channels 0, 1", "ks": "lower"}
+    # The formula's box only: ks has no upper bound, so a large ks is on none.
+    free = ParameterSpace.build(g)
+    assert free.at_bound(g.flatten({"kd": [0.5] * 3, "ks": [1e6] * 3, "alpha": [0.5], "f0": [0.5]})) == {}
+    # an infinite box measures its tolerance on the parameter's finite_range (alpha: 1e-6 x ~1)
+    lo_alpha = g.param("alpha").lower
+    assert free.at_bound(g.flatten({"kd": [0.5] * 3, "ks": [0.5] * 3, "alpha": [lo_alpha + 5e-7],
+                                    "f0": [0.5]})) == {"alpha": "lower"}
+    assert space.bound_origin("ks", "upper") == "set by bounds="
+    assert space.bound_origin("kd", "upper") == "its physical range; fit without physical=True to allow more"
+    assert space.bound_origin("kd", "lower") == "the formula's limit"
+    assert free.bound_origin("f0", "upper") == "the formula's limit"
+    assert (space.describe_bound("ks", "upper"), space.describe_bound("kd", "upper")) == (2.0, 1.0)
