@@ -58,3 +58,10 @@ def test_a_texel_without_valid_samples_is_a_usage_error():
         prepare_stack(values, wi, wo, np.ones(len(wi)), name="tile")
     assert str(caught.value) == ("tile[1]: no valid samples to fit (all have weight 0, non-finite values or lie "
                                  "below the horizon)")
+
+
+def test_the_default_name_is_batch():
+    wi, wo = ubo_pairs()
+    values = np.full((2, len(wi), 3), np.nan)
+    with pytest.raises(UsageError, match=r"^batch\[0\]: no valid samples"):
+        prepare_stack(values, wi, wo, np.ones(len(wi)))
