@@ -45,24 +45,6 @@ def parse_assignments(option: str, items, expect_pair: bool) -> dict:
     return out
 
 
-def _prefetch_imports() -> None:
-    """Import, on a second thread, what the command needs only later: matplotlib for fit.png, and
-    scipy.linalg, which JAX imports when it first lowers a CPU program (LAPACK's entry points).
-
-    Both are pure-Python imports (~0.6 s and ~0.3 s on the CI machine); the main thread meanwhile
-    reads the file, loads the compiled fit from the cache and runs it, mostly outside the GIL.
-    Measured on a second-process ``brdffit fit data/sample_ubo81.exr --model ggx``, 8 runs each,
-    interleaved: median 3.81 s with, 4.35 s without. A failure here is left to the main thread's
-    own import, which reports it as usual."""
-    import importlib
-
-    for name in ("scipy.linalg", "brdffit.plot", "matplotlib.backends.backend_agg"):
-        try:
-            importlib.import_module(name)
-        except Exception:  # noqa: BLE001 - reported by the main thread's import of the same module
-            return
-
-
 def model_help() -> str:
     """--model's help: the model names (``brdffit models`` shows their parameters)."""
     from ..models import names
@@ -102,13 +84,9 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from contextlib import nullcontext
 
-    import threading
-
     from rich.console import Console
 
-    prefetch = threading.Thread(target=_prefetch_imports, name="brdffit-prefetch")
-    prefetch.start()
-    from .. import load
+    from .. import load, plot
     import contextlib
 
     from .._files import atomic_dir, reserve
@@ -155,9 +133,6 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress,
                 bounds=bounds, fixed=fixed, physical=physical, scene=usage)
         progress("writing fit.json, fit.png")
-        prefetch.join()
-        from .. import plot
-
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
             plot.fit_figure(m, r).savefig(tmp / "fit.png", dpi=110)
