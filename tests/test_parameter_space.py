@@ -368,3 +368,13 @@ def test_at_bound_per_channel_and_its_tolerance():
     assert space.bound_origin("kd", "lower") == "the formula's limit"
     assert free.bound_origin("f0", "upper") == "the formula's limit"
     assert (space.describe_bound("ks", "upper"), space.describe_bound("kd", "upper")) == (2.0, 1.0)
+
+
+def test_only_lobes_of_one_kind_are_interchangeable():
+    """ggx and cook_torrance lobes have equal parameter boxes, yet are different formulas: never
+    swapped. Two kinds with two lobes each give two groups."""
+    assert ParameterSpace.build(models.get("ggx+cook_torrance")).order == ()
+    assert ParameterSpace.build(models.get("phong+blinn_phong")).order == ()
+    order = ParameterSpace.build(models.get("ggx+ggx+blinn_phong+blinn_phong")).order
+    assert [[lobe.params[0] for lobe in group] for group in order] == [["ggx1.ks", "ggx2.ks"],
+                                                                       ["blinn_phong1.ks", "blinn_phong2.ks"]]

@@ -59,6 +59,27 @@ def test_the_default_tolerance_is_five_percent(case):
     assert select(m, [simple, complex_], tolerance=0.49).model_name == "ggx"
 
 
+def test_zero_tolerance_keeps_the_best(case):
+    m, simple, complex_, _ = case
+    assert select(m, [simple, complex_], tolerance=0.0).model_name == "ggx"
+
+
+def test_an_exact_candidate_scores_with_the_floor_of_the_sse():
+    """An exact fit has SSE ~ 0: the criteria take ln(max(SSE, 1e-300) / n), finite."""
+    rng = np.random.default_rng(4)
+    n = 200
+    wi = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    wo = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    lam = models.get("lambert")
+    m = brdffit.Measurement(wi, wo, np.asarray(lam.eval(lam.check_params({"kd": [0.3, 0.2, 0.1]}), wi, wo)), name="flat")
+    exact = fit(m, "lambert")
+    e = evaluate(exact.model, exact.params, prepare(m).data)["log"]
+    assert e * 3 * n < 1.0  # the floor at work is the 1e-300 one, not a larger one
+    sel = select(m, [exact], criterion="aic")
+    want = 3 * n * math.log(max(e * 3 * n, 1e-300) / (3 * n)) + 2.0 * 3
+    assert sel.scores["lambert/lm/log"] == pytest.approx(want, rel=1e-12)
+
+
 def test_tolerance_reason_and_scores(case):
     m, simple, complex_, e_simple = case
     sel = select(m, [complex_, simple], tolerance=0.6)
