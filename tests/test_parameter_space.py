@@ -367,6 +367,8 @@ def test_at_bound_per_channel_and_its_tolerance():
     assert space.bound_origin("kd", "upper") == "its physical range; fit without physical=True to allow more"
     assert space.bound_origin("kd", "lower") == "the formula's limit"
     assert free.bound_origin("f0", "upper") == "the formula's limit"
+    # with physical=True, a bound equal to the formula's (f0 <= 1) is still the formula's limit
+    assert ParameterSpace.build(g, physical=True).bound_origin("f0", "upper") == "the formula's limit"
     assert (space.describe_bound("ks", "upper"), space.describe_bound("kd", "upper")) == (2.0, 1.0)
 
 
