@@ -274,8 +274,9 @@ def result_check(value, l0, v, code, loss_floor):
 
 def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
     """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free, consts) -> (v, loss, code,
-    steps, J^T J at v, loss at v0); ``consts``: :func:`fit_constants` of the data. The caller checks the result (:func:`result_check`, done by ``program.fit_program``
-    on the best start's result, with the loss evaluated afresh for the metrics anyway)."""
+    steps, J^T J at v, loss at v0); ``consts``: :func:`fit_constants` of the data. The caller
+    checks the result (:func:`result_check`, done by ``program.fit_program`` on the best start's
+    result, with the loss evaluated afresh for the metrics anyway)."""
     from .structure import gauss_newton_matrix, model_values, normal_equations
 
     fn = flat_residual(model, loss)

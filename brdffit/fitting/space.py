@@ -6,8 +6,9 @@
    ``brdffit.models.base``);
 2. with ``physical=True``, the declared physical range instead (finite, plausible);
 3. ``bounds={"name": (lo, hi)}``: the user's box for that parameter (replaces 1 and 2; ``None`` on
-   a side keeps that side of 1, or of 2 with ``physical=True``). It must lie inside the declared bounds -- outside them the formula is not
-   defined or not finite -- and it may be wider than the physical range;
+   a side keeps that side of 1, or of 2 with ``physical=True``). It must lie inside the declared
+   bounds -- outside them the formula is not defined or not finite -- and it may be wider than the
+   physical range;
 4. ``fixed={"name": value}``: the parameter is held at ``value`` (a scalar, or one value per
    channel); the value must lie inside the declared bounds and any ``bounds=`` given for it
    (the physical range does not apply to a value the user fixes).
