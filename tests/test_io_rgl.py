@@ -93,5 +93,5 @@ def test_rgl_inconsistent_shapes_rejected_before_mitsuba(tmp_path):
     struct.pack_into("<Q", data, at + 2 + 1 + 8, 7)  # 8 -> 7 elevations: disagrees with 'rgb'
     p = tmp_path / "shapes.bsdf"
     p.write_bytes(bytes(data))
-    with pytest.raises(InputError, match="'rgb' has shape .* expected \(1, 7,"):
+    with pytest.raises(InputError, match=r"'rgb' has shape .* expected \(1, 7,"):
         brdffit.load(p)

@@ -1,11 +1,13 @@
 """Persistent compilation cache (SPEC 5): compiled solvers are kept on disk, so a second process
 does not compile again.
 
-JAX's own persistent cache, in ``<user cache folder>/jax`` (``platformdirs.user_cache_dir
-("brdffit")``: ``~/.cache/brdffit`` on Linux, ``~/Library/Caches/brdffit`` on macOS).
-``BRDFFIT_CACHE=DIR`` moves it, ``BRDFFIT_CACHE=off`` disables it. Enabled when
-``brdffit.fitting`` is imported (before anything compiles). Every compilation is kept, however
-short (JAX keeps only those over 1 s by default; our solvers take 0.2-3 s each).
+In ``<user cache folder>/jax`` (``platformdirs.user_cache_dir("brdffit")``: ``~/.cache/brdffit``
+on Linux, ``~/Library/Caches/brdffit`` on macOS); ``BRDFFIT_CACHE=DIR`` moves it,
+``BRDFFIT_CACHE=off`` disables it. Two layers: the programs of library models (fit, start grid,
+batch) are kept whole, compiled, by :func:`load_or_compile` (a second process loads them without tracing
+or lowering); everything else goes through JAX's own persistent cache, enabled when
+``brdffit.fitting`` is imported (before anything compiles), which keeps every compilation however
+short (JAX keeps only those over 1 s by default; ours take 0.1-3 s each).
 """
 
 from __future__ import annotations
@@ -42,10 +44,18 @@ def enable() -> Path | None:
     except OSError:
         return None  # a read-only home: compile every time rather than fail
     jax.config.update("jax_compilation_cache_dir", str(path))
+    if "jax_hits" not in _STATE:
+        _STATE["jax_hits"] = 0
+        jax.monitoring.register_event_listener(_count_jax_cache_hits)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _STATE["dir"] = path
     return path
+
+
+def _count_jax_cache_hits(event: str, **kwargs) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _STATE["jax_hits"] += 1
 
 
 def cache_enabled() -> bool:
@@ -90,40 +100,97 @@ def _key_text(key, example) -> str | None:
     return f"{parts}|{shapes}|{jax.tree_util.tree_structure(example)}|jax {jax.__version__}|{_source_hash()}"
 
 
-def exported(key, build, example):
-    """Compiled ``jax.jit(build())`` for ``example``'s shapes; with the cache on, the traced
-    program is kept on disk (``jax.export``) and the compiled code in JAX's persistent cache."""
+def _machine() -> str:
+    """What a compiled CPU program depends on besides its source and shapes: jaxlib, the backend,
+    and the instruction set it was compiled for (a cache folder shared between machines must not
+    hand a program built for AVX-512 to a CPU without it)."""
+    if "machine" not in _STATE:
+        import platform
+
+        import jax
+        import jaxlib
+
+        features = platform.processor()
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+                features = next((line for line in fh if line.startswith(("flags", "Features"))), features)
+        except OSError:
+            pass
+        device = jax.devices()[0]
+        _STATE["machine"] = (f"jaxlib {jaxlib.__version__}|{device.platform}|{device.client.platform_version}|"
+                             f"{platform.machine()}|{features.strip()}")
+    return _STATE["machine"]
+
+
+def load_or_compile(key, build, example):
+    """Compiled ``jax.jit(build())`` for ``example``'s shapes; with the cache on, the compiled
+    program itself is kept on disk, so that a second process neither traces, lowers nor compiles
+    it: it only loads the machine code (``jax.experimental.serialize_executable``; loading runs
+    what the file holds, so the cache folder is trusted as JAX's own cache folder is).
+
+    Measured on ggx/UBO-81, the fit in a second process: 0.32-0.39 s, against 0.55-0.72 s when the
+    traced program was kept (``jax.export``), lowered again in every process (which also imported
+    scipy.linalg for LAPACK), then handed its machine code by JAX's cache; ``brdffit fit`` as a whole
+    ~0.4 s faster (issue 8's note; ``benchmarks/bench_cli.py`` prints the phases)."""
     import hashlib
+    import pickle
 
     import jax
 
     path = _STATE["dir"]
-    text = _key_text(key, example) if path is not None else None
+    # Several processes (jax.distributed, fit_btf): a loaded program would be bound to every
+    # process's devices; JAX's own cache serves them.
+    text = _key_text(key, example) if path is not None and jax.process_count() == 1 else None
     if text is None:
         return jax.jit(build()).lower(*example).compile()
-    file = path / "brdffit-export" / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".bin")
-    # The exported program takes the flat list of arrays (our own pytree types, such as
-    # problem.Data, are not serialisable); the returned callable takes the original arguments.
+    text = f"{text}|{_machine()}"
+    file = path / "brdffit-programs" / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".bin")
+    # The program takes the flat list of arrays (our own pytree types, such as problem.Data, are not
+    # kept on disk); the returned callable takes the original arguments.
     leaves, treedef = jax.tree_util.tree_flatten(example)
 
     def wrap(compiled_flat):
         return lambda *args: compiled_flat(*jax.tree_util.tree_leaves(args))
 
+    from jax.experimental import serialize_executable
+
     if file.exists():
         try:
-            exp = jax.export.deserialize(bytearray(file.read_bytes()))
-            return wrap(jax.jit(exp.call).lower(*leaves).compile())
-        except Exception:  # a damaged or foreign file: trace again below
+            saved = pickle.loads(file.read_bytes())
+            if saved["key"] == text:  # not a hash collision or a file of another version
+                if saved["lapack"]:
+                    # LAPACK's entry points are looked up (from SciPy) when a program calling them
+                    # is lowered; a loaded program is not lowered, so look them up here (without
+                    # them the program would call a null pointer).
+                    from jax._src.lax.linalg import initialize_lapack  # jax is pinned (pyproject)
+
+                    initialize_lapack()
+                return wrap(serialize_executable.deserialize_and_load(saved["program"], saved["in_tree"],
+                                                                      saved["out_tree"]))
+        except Exception:  # noqa: BLE001 - a damaged or foreign file: compile again below
             pass
     fn = build()
-    jitted = jax.jit(lambda *flat: fn(*jax.tree_util.tree_unflatten(treedef, flat)))
+    hits = _STATE.get("jax_hits", 0)
+    compiled = jax.jit(lambda *flat: fn(*jax.tree_util.tree_unflatten(treedef, flat))).lower(*leaves).compile()
+    if _STATE.get("jax_hits", 0) != hits:
+        # JAX's own cache handed back this program: it runs, but serialised again it lacks its
+        # machine code ("Function ... not found" in the next process; seen with jaxlib 0.10).
+        # Only a program compiled here is kept (this one stays on the slower path: lowered, then
+        # loaded by JAX, in every process).
+        return wrap(compiled)
     try:
-        exp = jax.export.export(jitted)(*leaves)
-        data = exp.serialize()
+        program, in_tree, out_tree = serialize_executable.serialize(compiled)
+        # Any custom call: make sure LAPACK's entry points are set before a later process runs it
+        # (the fit programs call none: see linalg.py).
+        data = pickle.dumps({"key": text, "program": program, "in_tree": in_tree, "out_tree": out_tree,
+                             "lapack": "custom_call_target" in compiled.as_text()})
+    except Exception:  # noqa: BLE001 - not serialisable: no disk copy
+        return wrap(compiled)
+    tmp = file.with_suffix(f".tmp{os.getpid()}")
+    try:
         file.parent.mkdir(parents=True, exist_ok=True)
-        tmp = file.with_suffix(f".tmp{os.getpid()}")
         tmp.write_bytes(data)
-        os.replace(tmp, file)  # atomic: concurrent processes write the same bytes
-        return wrap(jax.jit(exp.call).lower(*leaves).compile())
-    except Exception:  # not exportable (e.g. a custom call without a stable id): no disk copy
-        return wrap(jitted.lower(*leaves).compile())
+        os.replace(tmp, file)  # atomic: concurrent processes write equivalent programs
+    except OSError:  # a full disk or a read-only folder: no disk copy, no partial file
+        tmp.unlink(missing_ok=True)
+    return wrap(compiled)

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..models.base import Model, Param
 from . import losses as L
+from .linalg import spd_solve
 from .problem import Data
 from .structure import basis_fn, separable
 
@@ -131,7 +132,7 @@ def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
     solution clipped, then projected coordinate descent."""
     n = rhs.shape[0]
     ridge = 1e-9 * jnp.eye(n, dtype=gram.dtype)
-    x = jnp.linalg.solve(gram + ridge, rhs)
+    x = spd_solve(gram + ridge, rhs)
     x = jnp.where(jnp.all(jnp.isfinite(x)), x, rhs)
     x = jnp.clip(x, lo, hi)
     for _ in range(sweeps):

@@ -29,7 +29,7 @@ from .._fit_defaults import SOLVERS
 from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
-from .cache import cache_enabled, exported
+from .cache import cache_enabled, load_or_compile
 from .problem import Data, flat_residual, values_metrics
 
 #: Solvers that run compiled (and vmap): everything but scipy.
@@ -65,8 +65,8 @@ def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str],
     """Compile ``build()`` for these argument shapes once per process and, through the disk cache
     (``cache``), once per machine; returns (compiled function, compile seconds this call).
 
-    On disk: JAX's persistent cache keeps the compiled code, and ``cache.exported`` keeps the
-    traced program (``jax.export``), so that a second process skips tracing optimistix too."""
+    On disk (``cache.load_or_compile``): the compiled program itself, so that a second process
+    neither traces (nor imports optimistix), lowers nor compiles it."""
     full = (key, _shape_key(example))
     hit = _CACHE.get(full)
     if hit is not None:
@@ -74,7 +74,7 @@ def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str],
     if note is not None:
         note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
     t0 = time.perf_counter()
-    fn = exported(key, build, example)
+    fn = load_or_compile(key, build, example)
     dt = time.perf_counter() - t0
     _CACHE[full] = fn
     return fn, dt

@@ -36,6 +36,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
 from ..models.base import Model
 from . import losses as L
+from .linalg import inverse_quadratic_form, spd_solve
 from .problem import Data, flat_residual
 # Re-exported: solver names, statuses and the compile cache live where no optimistix import is
 # needed (a second process runs a cached program without importing optimistix).
@@ -137,8 +138,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         Hs = H / D[:, None] / D[None, :]
         mask2 = (~held)[:, None] & (~held)[None, :]
         A = jnp.where(mask2, Hs + lam * eye, eye)  # held: identity rows, zero gradient
-        L = jnp.linalg.cholesky(A)
-        d = -jax.scipy.linalg.cho_solve((L, True), gf / D) / D
+        d = -spd_solve(A, gf / D) / D
         d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)
         # Parameters with a positive lower bound (roughness, exponents) move by at most a factor
         # STEP_FACTOR per step (a trust region on their log axis, scale-free): the roughness of a
@@ -178,7 +178,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         mask_next = (~held_next)[:, None] & (~held_next)[None, :]
         A_next = jnp.where(mask_next, H_next / col[:, None] / col[None, :], eye)
         gs = jnp.where(held_next, 0.0, g_next) / col
-        decrement = gs @ jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(A_next), True), gs)
+        decrement = inverse_quadratic_form(A_next, gs)
         small_dec = accept & jnp.isfinite(decrement) & (decrement >= 0) & (decrement <= self.rtol * c_next)
         exact = c_next <= jnp.maximum(self.atol**2, options.get("loss_floor", 0.0))
         stuck = (~accept) & (lam_next > 1e16)

@@ -1,0 +1,51 @@
+"""The disk cache of compiled fit programs (brdffit.fitting.cache, SPEC 5), in new processes: a
+second process loads the program ready-compiled (no tracing, no lowering, no scipy.linalg), and a
+program that JAX's own cache handed back is never kept (serialised again, it lacks its machine code
+and the next process would fail with "Function ... not found")."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+FIT = f"""
+import json, sys
+import jax
+lowered = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, duration, **kw: lowered.append(kw.get("fun_name", "?"))
+    if event == "/jax/core/compile/jaxpr_to_mlir_module_duration" else None)
+import brdffit
+r = brdffit.fit(brdffit.load({str(REPO / 'data' / 'sample_ubo81.exr')!r}), "ggx", max_steps=int(sys.argv[1]))
+print(json.dumps({{"loss": r.loss_value, "status": r.status, "lowered": lowered,
+                  "scipy_linalg": "scipy.linalg" in sys.modules}}))
+"""
+
+
+def _fit(cache: Path, max_steps: int = 100) -> dict:
+    run = subprocess.run([sys.executable, "-c", FIT, str(max_steps)], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, BRDFFIT_CACHE=str(cache)))
+    assert run.returncode == 0, run.stderr[-3000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def test_second_process_loads_the_fit_program_without_lowering_or_scipy(tmp_path):
+    first, second = _fit(tmp_path), _fit(tmp_path)
+    assert first["lowered"], "the first process compiles (the cache folder was empty)"
+    assert second["lowered"] == [] and not second["scipy_linalg"], second
+    assert second["loss"] == first["loss"] and second["status"] == "converged"
+
+
+def test_a_program_from_jax_own_cache_is_not_kept(tmp_path):
+    first = _fit(tmp_path, 77)
+    shutil.rmtree(tmp_path / "brdffit-programs")  # JAX's entry stays: the next compile is a JAX cache hit
+    again = _fit(tmp_path, 77)
+    assert not (tmp_path / "brdffit-programs").exists() or not any((tmp_path / "brdffit-programs").iterdir())
+    third = _fit(tmp_path, 77)
+    assert first["loss"] == again["loss"] == third["loss"] and third["status"] == "converged"
