@@ -58,6 +58,20 @@ def test_exr_is_an_81x81_image_rows_light(tmp_path):
     assert "values" not in f.header()["brdffit.f64"]  # float32 values need no float64 copy
 
 
+def test_exr_f64_encoding_is_float64_little_endian_whatever_the_input():
+    """``brdffit.f64`` entries are base64(zlib(float64 little-endian)) (module docstring), decoded
+    here by hand: a float32 or big-endian array given to the encoder is stored in that layout too."""
+    import base64
+    import zlib
+
+    from brdffit.io.exr import _pack
+
+    for a in (np.array([0.1, 1 / 3, -2.5], np.float32), np.array([[0.1, 1 / 3], [-2.5, 1e300]], dtype=">f8")):
+        raw = zlib.decompress(base64.b64decode(_pack(a)))
+        assert len(raw) == 8 * a.size
+        np.testing.assert_array_equal(np.frombuffer(raw, dtype="<f8"), a.astype(np.float64).ravel())
+
+
 def test_save_rules(tmp_path):
     m = ubo_measurement()
     p = brdffit.save(m, tmp_path / "a.npz")

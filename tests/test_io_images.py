@@ -59,6 +59,24 @@ def test_srgb_eotf_exact():
     np.testing.assert_allclose(srgb_to_linear(np.array([128, 188]) / 255), [0.2158605, 0.5028865], rtol=1e-6)
 
 
+def test_linear_to_srgb_clips_to_code_range_and_encodes_in_float64():
+    """Writers (sample images, BTF maps, render previews) rely on codes in [0, 1]: linear values below
+    0 encode as 0, above 1 as 1; in between, colour-science's sRGB encoding (IEC 61966-2-1)."""
+    import colour
+
+    def oetf(x):
+        return colour.cctf_encoding(np.asarray(x, np.float64), function="sRGB")
+
+    x = np.array([-2.0, -1e-3, 0.0, 0.002, 0.18, 0.5, 1.0, 1.5, 7.0])
+    expected = np.concatenate([[0.0, 0.0], oetf(x[2:7]), [1.0, 1.0]])
+    np.testing.assert_allclose(linear_to_srgb(x), expected, rtol=1e-12, atol=0)
+    # float32 input (e.g. an EXR image) is encoded in float64, not rounded to float32 on the way
+    x32 = np.array([0.002, 0.18, 0.5, 0.9], np.float32)
+    out = linear_to_srgb(x32)
+    assert out.dtype == np.float64
+    np.testing.assert_allclose(out, oetf(x32.astype(np.float64)), rtol=1e-12, atol=0)
+
+
 @pytest.mark.parametrize("layout", ["flat", "views"])
 def test_png_folder_colours(tmp_path, layout):
     table = codes(1)

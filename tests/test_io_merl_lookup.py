@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -131,3 +132,68 @@ def test_refusals(tmp_path, content, problem):
     with pytest.raises(InputError) as info:
         merl.read(p)
     assert info.value.path == str(p) and info.value.problem == problem
+
+
+def test_indices_where_the_reference_clamps_and_folds():
+    """indices() against BRDFRead.cpp's index functions (above) at the edges of the table: theta_h just
+    inside its last cell and beyond pi/2, theta_d at pi/2 and beyond, negative angles, phi_d folded."""
+    last_h = (89 / 90) ** 2 * (math.pi / 2)  # first theta_h of the last (89th) sqrt-spaced cell
+    theta_h = [0.0, -0.1, 1e-12, last_h - 1e-9, last_h + 1e-9, math.pi / 2, 2.0, math.pi]
+    theta_d = [-0.1, 0.0, 89 / 90 * (math.pi / 2) + 1e-9, math.pi / 2 - 1e-9, math.pi / 2, 2.0, math.pi, 0.5]
+    phi_d = [-4.0, -1e-9, -math.pi, 0.0, math.pi - 1e-9, math.pi, 3.5, -math.pi / 2]
+    ih, idd, ip = merl.indices(np.array(theta_h), np.array(theta_d), np.array(phi_d))
+    assert ih.tolist() == [theta_half_index(t) for t in theta_h] == [0, 0, 0, 88, 89, 89, 89, 89]
+    assert idd.tolist() == [theta_diff_index(t) for t in theta_d] == [0, 0, 89, 89, 89, 89, 89, 28]
+    assert ip.tolist() == [phi_diff_index(p) for p in phi_d] == [0, 179, 0, 0, 179, 179, 179, 90]
+
+
+def test_half_diff_of_retro_pairs_has_theta_d_zero_without_warnings():
+    """Light = view (retro-reflection): theta_h = theta, theta_d = 0 (Rusinkiewicz 1998). At these
+    directions the rotated difference vector's z rounds to 1 + 2**-52: acos must still give 0."""
+    t = np.deg2rad([15.0, 15.0, 75.0, 5.0])
+    f = np.deg2rad([120.0, 150.0, 15.0, 270.0])
+    w = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        theta_h, theta_d, _ = merl.half_diff(w, w.copy())
+    np.testing.assert_allclose(theta_h, t, rtol=0, atol=1e-12)
+    assert np.all(np.isfinite(theta_d)) and np.all(np.abs(theta_d) < 1e-7)
+
+
+def test_opposite_directions_are_an_invalid_sample_not_a_crash(table_file):
+    """Light and view opposite on the horizon have no half vector (0/0): that pair gets weight 0 and
+    the others are read as usual (normal incidence and view: cell (0, 0, 0))."""
+    path, brdf = table_file
+    n = 90 * 90 * 180
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = merl.read(path, wi=[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], wo=[[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert np.asarray(m.weights).tolist() == [0.0, 1.0]
+    np.testing.assert_array_equal(np.asarray(m.values)[0], [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(
+        np.asarray(m.values)[1], [brdf[0] * RED_SCALE, brdf[n] * GREEN_SCALE, brdf[2 * n] * BLUE_SCALE], rtol=1e-12
+    )
+
+
+def test_zero_small_and_nan_cells_and_the_horizon(tmp_path):
+    """Stored 0 and values below 1 are measurements (only negative = unmeasured); a NaN in one channel
+    invalidates that sample only; a light or view on the horizon (z = 0) gets weight 0. The table is
+    150 everywhere but in three theta_h rows; for light = view = (sin t, 0, cos t), theta_h = t, so
+    index_h = floor(sqrt(t / (pi/2)) * 90): t = 0 -> 0, 0.3 -> 39 (39.3), 0.6 -> 55 (55.6), 0.9 -> 68 (68.1);
+    light (1, 0, 0) or view (0, 1, 0) with the other at the normal: theta_h = pi/4 -> 63 (63.6)."""
+    brdf = np.full((3, 90, 90, 180), 150.0)
+    brdf[:, 0] = 0.0
+    brdf[:, 39] = 0.5
+    brdf[2, 55] = np.nan
+    path = tmp_path / "edge.binary"
+    path.write_bytes(struct.pack("<3i", 90, 90, 180) + brdf.astype("<f8").tobytes())
+    t = np.array([0.0, 0.3, 0.6, 0.9])
+    w = np.stack([np.sin(t), np.zeros(4), np.cos(t)], axis=1)
+    light = np.concatenate([w, [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    view = np.concatenate([w, [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]])
+    m = merl.read(path, wi=light, wo=view)
+    scales = np.array([RED_SCALE, GREEN_SCALE, BLUE_SCALE])
+    assert np.asarray(m.weights).tolist() == [1.0, 1.0, 0.0, 1.0, 0.0, 0.0]
+    np.testing.assert_allclose(
+        np.asarray(m.values), [[0.0] * 3, 0.5 * scales, [0.0] * 3, 150.0 * scales, [0.0] * 3, [0.0] * 3], rtol=1e-15
+    )
+    assert dict(m.extra)["lookup"] == "nearest cell, sqrt(theta_h) indexing (MERL reference code)"

@@ -95,3 +95,69 @@ def test_rgl_inconsistent_shapes_rejected_before_mitsuba(tmp_path):
     p.write_bytes(bytes(data))
     with pytest.raises(InputError, match=r"'rgb' has shape .* expected \(1, 7,"):
         brdffit.load(p)
+
+
+def test_rgl_lights_at_or_below_the_horizon_give_zero_silently(tmp_path):
+    """A generated material (tests/tensor_file.py, closed form: stored value = rgb0 + (rgb1 - rgb0) *
+    theta_view / (pi/2)). Mitsuba's own eval is 0 for a light on or below the horizon, and so is f_r,
+    with no NumPy warning for the 0/0 at the horizon; above it, f_r = stored / cos(theta_light)."""
+    import warnings
+
+    from brdffit._mitsuba import mitsuba
+    from brdffit.io.rgl import eval_mitsuba
+    from tensor_file import isotropic_material
+
+    rgb0, rgb1 = np.array([0.2, 0.4, 0.6]), np.array([1.0, 0.9, 0.3])
+    path = isotropic_material(tmp_path / "m.bsdf", rgb0, rgb1)
+    light = np.array([[0.6, 0.0, 0.8], [1.0, 0.0, 0.0], [0.0, -0.6, -0.8], [0.0, 0.0, 1.0]])
+    view = np.tile([[0.0, 0.6, 0.8]], (4, 1))
+    mi = mitsuba()  # the variant choice may warn once (no usable libLLVM): not what is checked here
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(0.0, 0.6, 0.8)
+    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
+    for at_or_below in light[[1, 2]]:  # Mitsuba's eval itself (f_r cos, before any division)
+        value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*map(float, at_or_below)))
+        assert np.array(value).ravel().tolist() == [0.0, 0.0, 0.0]
+    stored = rgb0 + (rgb1 - rgb0) * np.arccos(0.8) / (np.pi / 2)
+    expected = np.array([stored / 0.8, [0.0] * 3, [0.0] * 3, stored / 1.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        f = eval_mitsuba(path, light, view)
+        m = brdffit.load(path, wi=light, wo=view)
+    np.testing.assert_allclose(f, expected, rtol=2e-6, atol=0)
+    np.testing.assert_allclose(np.asarray(m.values), expected, rtol=2e-6, atol=0)
+    assert np.asarray(m.weights).tolist() == [1.0, 0.0, 0.0, 1.0]
+
+
+def test_rgl_non_finite_value_deep_in_a_2d_field_is_refused(tmp_path):
+    """Every value of a field is checked, not just its first row: a NaN in the last NDF cell."""
+    from tensor_file import isotropic_material
+
+    ndf = np.ones((8, 8), np.float32)
+    ndf[7, 7] = np.nan
+    path = isotropic_material(tmp_path / "nan.bsdf", [0.2, 0.4, 0.6], [1.0, 0.9, 0.3], ndf=ndf)
+    with pytest.raises(InputError) as info:
+        brdffit.load(path)
+    assert info.value.path == str(path) and info.value.problem == "field 'ndf' holds 1 non-finite value(s)"
+
+
+def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypatch):
+    """Should a file Mitsuba's plugin refuses get past our checks (here a two-entry 'jacobian', with
+    the check bypassed), the refusal is an InputError naming the file, carrying Mitsuba's own message
+    with its whitespace collapsed to single spaces (one line) and cut to 300 characters."""
+    from brdffit._mitsuba import mitsuba
+    from brdffit.io import rgl
+    from tensor_file import isotropic_material
+
+    path = isotropic_material(tmp_path / "jac.bsdf", [0.2, 0.4, 0.6], [1.0, 0.9, 0.3], jacobian=np.zeros(2, np.uint8))
+    with pytest.raises(InputError, match=r"'jacobian' has shape \(2,\)"):
+        rgl.check_tensor_file(path)  # what normally stops it
+    with pytest.raises(Exception) as raw:  # noqa: PT011 - Mitsuba's own exception type
+        mitsuba().load_dict({"type": "measured", "filename": str(path)})
+    mitsuba_says = " ".join(str(raw.value).split())
+    assert "Invalid file structure" in mitsuba_says and len(mitsuba_says) > 300 and "\n" in str(raw.value)
+    monkeypatch.setattr(rgl, "check_tensor_file", lambda p: {})
+    with pytest.raises(InputError) as info:
+        rgl.load_measured(path)
+    assert info.value.path == str(path)
+    assert info.value.problem == "Mitsuba's measured plugin cannot read it: " + mitsuba_says[:300]
