@@ -3,9 +3,12 @@ its weights against a brute-force nearest neighbour and scipy's Delaunay hull, a
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
-from scipy.spatial import Delaunay
+from scipy.interpolate import LinearNDInterpolator
+from scipy.spatial import ConvexHull, Delaunay
 
 import brdffit
 from brdffit.errors import InputError, UsageError
@@ -98,3 +101,51 @@ def test_reciprocity_is_the_default():
     m, _ = scattered(n=60, seed=4)
     assert "with reciprocity" in dict(interpolate_scattered(m).extra)["interpolation"]
     assert "with reciprocity" in dict(resample(m).extra)["interpolation"]
+
+
+def test_five_valid_samples_are_enough_and_interpolated_against_scipy():
+    """The smallest accepted input: 5 valid samples (and 2 invalid ones: weight 0, a NaN value),
+    reciprocity on. Expected values by hand and from scipy directly: a function linear in
+    (theta_light, theta_view, dphi) and symmetric in the two thetas is reproduced inside the hull
+    whatever the tetrahedralisation; outside it the nearest of the 10 points (brute force) gives
+    value and weight."""
+    deg = np.array([[10.0, 25.0, 20.0], [50.0, 35.0, 100.0], [70.0, 20.0, 160.0], [35.0, 70.0, 60.0],
+                    [25.0, 50.0, 130.0], [40.0, 40.0, 90.0], [20.0, 30.0, 10.0]])  # (theta_l, theta_v, dphi)
+    phi_l = np.array([0.0, 30.0, 200.0, 90.0, 300.0, 0.0, 0.0])
+    wi = direction(deg[:, 0], phi_l)
+    wo = direction(deg[:, 1], phi_l + deg[:, 2])
+    x = np.radians(deg)
+
+    def f(p):
+        g = 0.5 + 0.7 * (p[:, 0] + p[:, 1]) + 0.3 * p[:, 2]
+        return np.stack([g, 3.0 - 2.0 * g], axis=1)
+
+    values = f(x)
+    values[6, 1] = np.nan  # invalid: not finite
+    weights = np.array([1.0, 1, 1, 1, 1, 0, 1])  # invalid: weight 0
+    m = brdffit.Measurement(wi=wi, wo=wo, values=values, weights=weights, name="five", source="five.brdf")
+    r = interpolate_scattered(m)
+    pts = np.concatenate([x[:5], x[:5][:, [1, 0, 2]]])
+    vals = np.concatenate([values[:5], values[:5]])
+    q = isotropic_coords(*ubo_pairs())
+    # signed distance to the hull's faces: grid points on a face (e.g. (45, 45, 160) on the edge from a
+    # sample to its swap) are left out, since rounding puts them either side
+    hull = ConvexHull(pts)
+    margin = (hull.equations[:, :3] @ q.T + hull.equations[:, 3:]).max(axis=0)
+    inside, outside = margin < -1e-9, margin > 1e-9
+    v, w = np.asarray(r.values), np.asarray(r.weights)
+    assert inside.sum() > 50 and outside.sum() > 50
+    # (the product rounds sample coordinates to 1e-9 rad before interpolating: agreement to ~1e-8)
+    np.testing.assert_allclose(v[inside], f(q[inside]), rtol=1e-8)
+    np.testing.assert_allclose(v[inside], LinearNDInterpolator(pts, vals)(q[inside]), rtol=1e-8)
+    assert np.all(w[inside] == 1.0)
+    d = np.linalg.norm(q[:, None, :] - pts[None, :, :], axis=2)
+    dmin = d.min(axis=1)
+    for i in np.flatnonzero(outside):  # the value of one of the nearest points (a grid point can have ties)
+        tied = d[i] <= dmin[i] + 1e-9
+        assert np.any(np.all(vals[tied] == v[i], axis=1)), i
+    np.testing.assert_allclose(w[outside], 1 / (1 + (dmin[outside] / np.radians(10)) ** 2), rtol=1e-7)
+    assert dict(r.extra)["extrapolated"] == int(np.sum(w < 1)) >= outside.sum()
+    assert dict(r.extra)["resampled_from"] == "7 scattered samples (measurement)"
+    with pytest.raises(InputError, match=f"^{re.escape('five.brdf: only 4 valid samples: too few to interpolate')}$"):
+        interpolate_scattered(m.replace(weights=np.array([1.0, 1, 1, 1, 0, 0, 1])))
