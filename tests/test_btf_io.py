@@ -1,6 +1,6 @@
 """BTF reading (SPEC 7): folders and zip archives, space-separated names, JPEG / Radiance HDR,
-region / step / includes_cos / scale, the tile-major cache; the RGBE decoder against
-hand-computed values."""
+region / step / includes_cos / scale, the tile-major cache. (The RGBE reader and writer themselves:
+test_io_hdr.py.)"""
 
 from __future__ import annotations
 
@@ -13,49 +13,13 @@ import brdffit
 from brdffit.btf import generate as gen
 from brdffit.errors import InputError
 from brdffit.grid import UBO_SIZE, ubo_pairs
-from brdffit.io.hdr import decode_hdr, encode_hdr
+from brdffit.io.hdr import encode_hdr
 from brdffit.io.images import direction_name, srgb_to_linear
 
 
 def _truth(h=5, w=7, seed=0):
     m = brdffit.models.get("lambert")
     return m, gen.smooth_maps(m, h, w, seed=seed)
-
-
-# -- Radiance HDR -----------------------------------------------------------------------------------
-def test_rgbe_decoder_hand_values():
-    # Header, then one flat scanline of 2 pixels (width < 8: never run-length encoded).
-    # (128, 64, 32, e=129): (m + 0.5) * 2^(129 - 136) -> 128.5/128, 64.5/128, 32.5/128.
-    # (0, 0, 0, e=0): zero.
-    data = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 2\n" + bytes([128, 64, 32, 129, 0, 0, 0, 0])
-    img = decode_hdr(data)
-    assert img.shape == (1, 2, 3)
-    np.testing.assert_allclose(img[0, 0], [128.5 / 128, 64.5 / 128, 32.5 / 128], rtol=1e-7)
-    np.testing.assert_array_equal(img[0, 1], 0.0)
-
-
-def test_rgbe_decoder_run_length_scanline_hand_values():
-    # Width 8, new-style RLE: marker 2,2,0,8; then per component: R as a run of 8 x 200,
-    # G as 8 literal bytes 0..7 (count 8), B as a run of 8 x 10, E as a run of 8 x 130.
-    # R = 200.5 * 2^(130-136) = 200.5/64; G_k = (k + 0.5)/64; B = 10.5/64. EXPOSURE=2 halves all.
-    body = bytes([2, 2, 0, 8, 128 + 8, 200, 8, *range(8), 128 + 8, 10, 128 + 8, 130])
-    data = b"#?RADIANCE\nEXPOSURE=2\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 8\n" + body
-    img = decode_hdr(data)
-    np.testing.assert_allclose(img[0, :, 0], 200.5 / 64 / 2, rtol=1e-7)
-    np.testing.assert_allclose(img[0, :, 1], (np.arange(8) + 0.5) / 64 / 2, rtol=1e-7)
-    np.testing.assert_allclose(img[0, :, 2], 10.5 / 64 / 2, rtol=1e-7)
-
-
-def test_rgbe_round_trip_and_bad_input():
-    rng = np.random.default_rng(1)
-    img = rng.uniform(0, 5, (9, 11, 3))
-    back = decode_hdr(encode_hdr(img))
-    # RGBE keeps 8 bits of mantissa relative to the brightest channel of each pixel
-    assert np.all(np.abs(back - img) <= img.max(axis=-1, keepdims=True) / 256)
-    with pytest.raises(ValueError, match="not a Radiance"):
-        decode_hdr(b"P6\n1 1\n255\n\0\0\0")
-    with pytest.raises(ValueError, match="truncated"):
-        decode_hdr(encode_hdr(img)[:-40])
 
 
 # -- folders and archives ---------------------------------------------------------------------------
