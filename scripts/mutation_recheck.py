@@ -6,8 +6,12 @@ table) runs during the collection of the first test module, so mutmut credits it
 tests and never tries the tests that check that table. Here each survivor gets a fresh interpreter
 with the mutant active from the first import, and the package's test files (below) run.
 
-Mutants that ran past mutmut's CPU-time limit are rechecked too (without a limit): a fresh process
-compiles its JAX programs anew, which can exceed a limit derived from warm test timings.
+Mutants that ran past mutmut's CPU-time limit are rechecked too (with a wall-clock limit,
+RECHECK_TIMEOUT seconds, default 900: a fresh process compiles its JAX programs anew, which can
+exceed a limit derived from warm test timings; past it the mutant counts as a timeout, i.e.
+detected). So are mutants mutmut ran no test for ("no tests": code whose tests mutmut's
+configuration leaves out, e.g. hdr.py before it had its own fast test file), against the test
+files named on the command line.
 Kills are written to ``mutants/recheck.json`` (name -> "killed" or "survived"), which
 scripts/mutation_report.py reads; mutmut's own result files are left alone.
 Usage (from the repository root, after ``mutmut run``):
@@ -25,7 +29,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from mutation_report import SURVIVED, TIMEOUT, load_results  # noqa: E402
+from mutation_report import NO_TESTS, SURVIVED, TIMEOUT, load_results  # noqa: E402
 
 TESTS_BY_PACKAGE = {
     "brdffit.models": ["tests/test_models_*.py"],
@@ -49,7 +53,7 @@ def main(argv: list[str]) -> int:
     shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)  # the tests as they are now
     done = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
     todo = [n for n, s in load_results(Path(".")).items()
-            if s in (SURVIVED, TIMEOUT) and done.get(n) != "killed" and any(fnmatch.fnmatch(n, g) for g in globs)]
+            if s in (SURVIVED, TIMEOUT, NO_TESTS) and done.get(n) not in ("killed", "timeout") and any(fnmatch.fnmatch(n, g) for g in globs)]
     clean_packages = set()
     for name in todo:
         pkg = ".".join(name.split(".")[:2])
@@ -59,17 +63,22 @@ def main(argv: list[str]) -> int:
                 return 1
             clean_packages.add(pkg)
         r = _pytest(name, only or test_files(name))
-        done[name] = "killed" if r.returncode == 1 else "survived"
+        done[name] = "timeout" if r is None else "killed" if r.returncode == 1 else "survived"
         print(f"{done[name]:<9} {name}", flush=True)
         RECHECK.write_text(json.dumps(done, indent=1))
     return 0
 
 
-def _pytest(mutant: str, files: list[str]) -> subprocess.CompletedProcess:
+def _pytest(mutant: str, files: list[str]) -> subprocess.CompletedProcess | None:
+    """The test files' run with ``mutant`` active (None: past RECHECK_TIMEOUT, e.g. an endless loop)."""
     env = {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1"}
     env.pop("PYTHONPATH", None)  # the mutated copy in mutants/ must be what the tests import
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "not slow", *files]
-    return subprocess.run(cmd, cwd="mutants", env=env, capture_output=True, text=True)
+    try:
+        return subprocess.run(cmd, cwd="mutants", env=env, capture_output=True, text=True,
+                              timeout=float(os.environ.get("RECHECK_TIMEOUT", 900)))
+    except subprocess.TimeoutExpired:
+        return None
 
 
 if __name__ == "__main__":

@@ -12,7 +12,8 @@ An explanation counts only while the mutant's diff (``mutmut show``) still adds 
 ``change`` ("- text" for a line the mutant deletes): mutant names are numbered within a function, so an edit of that function can give the
 name to another mutation; such an entry is printed as stale and the mutant counts as a survivor.
 
-Survivors that scripts/mutation_recheck.py killed (``mutants/recheck.json``) count as killed.
+Survivors (and "no tests" mutants) that scripts/mutation_recheck.py killed (``mutants/recheck.json``)
+count as killed; those that ran past its time limit, as timeouts.
 
 Score = (killed + timeout + explained) / (all checked mutants). A timeout is a mutant that made the
 tests run past mutmut's CPU-time limit (an endless loop or a solver that never stops): detected.
@@ -80,9 +81,9 @@ def main(argv: list[str]) -> int:
     recheck = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
     rechecked = 0
     for name, status in sorted(results.items()):
-        if status in (SURVIVED, TIMEOUT) and name in recheck:  # run again without a time limit
+        if status in (SURVIVED, TIMEOUT, NO_TESTS) and name in recheck:  # run again in a fresh process
             rechecked += recheck[name] == KILLED
-            status = KILLED if recheck[name] == KILLED else SURVIVED
+            status = {KILLED: KILLED, TIMEOUT: TIMEOUT}.get(recheck[name], SURVIVED)
         if status == SURVIVED and name in equivalents:
             change = equivalents[name]["change"].strip()
             if any(change in line for line in mutated_lines(name)):
