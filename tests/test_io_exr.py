@@ -164,3 +164,21 @@ def test_existing_file_refused_without_force_replaced_with_force(tmp_path):
     _, chans = open_exr(p)
     np.testing.assert_array_equal(chans["Y"].pixels, np.full((81, 81), 2.0, np.float32))
     assert [x.name for x in tmp_path.iterdir()] == ["f.exr"]  # no temporary files left
+
+
+def test_values_beyond_float32_are_written_silently_and_kept_exactly(tmp_path):
+    """A value beyond float32's range becomes inf in the float32 channel (the float64 copy keeps it)
+    and writing warns about nothing: the cast overflows by design."""
+    import warnings
+
+    import OpenEXR
+
+    values = f32_exact_values(3)
+    values[7, 1] = 1e39
+    path = tmp_path / "big.exr"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        exr.write(ubo(values), path)
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        assert np.isinf(f.channels()["G"].pixels.reshape(-1)[7])
+    assert brdffit.load(path).values[7, 1] == 1e39

@@ -61,10 +61,12 @@ def write(m: Measurement, path, *, force: bool = False) -> None:
     gwi, gwo = ubo_pairs()
     table = values.reshape(UBO_SIZE, UBO_SIZE, c)
     names = ("R", "G", "B") if c == 3 else ("Y",)
-    channels = {n: np.ascontiguousarray(table[:, :, k].astype(np.float32)) for k, n in enumerate(names)}
-    channels["weight"] = np.ascontiguousarray(weights.reshape(UBO_SIZE, UBO_SIZE).astype(np.float32))
     exact = {}
+    # Values beyond float32's range become inf in the channels by design (the float64 copy below
+    # keeps them): no warning for that cast.
     with np.errstate(over="ignore", invalid="ignore"):
+        channels = {n: np.ascontiguousarray(table[:, :, k].astype(np.float32)) for k, n in enumerate(names)}
+        channels["weight"] = np.ascontiguousarray(weights.reshape(UBO_SIZE, UBO_SIZE).astype(np.float32))
         if not np.array_equal(values.astype(np.float32).astype(np.float64), values, equal_nan=True):
             exact["values"] = _pack(values)
         if not np.array_equal(weights.astype(np.float32).astype(np.float64), weights, equal_nan=True):
