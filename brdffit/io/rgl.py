@@ -186,11 +186,18 @@ def eval_mitsuba(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
     from .._mitsuba import mitsuba
 
     mi = mitsuba()
+    import drjit as dr
+
     bsdf = load_measured(path)
-    si = mi.SurfaceInteraction3f()
+    # Every field defined, at the batch's width (Mitsuba's documented way to evaluate a BSDF from
+    # Python); a default-constructed interaction leaves its other fields as empty arrays. The
+    # float32 directions stay referenced until the result is evaluated (Dr.Jit is lazy).
+    si = dr.zeros(mi.SurfaceInteraction3f, light.shape[0])
     si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
-    si.wi = mi.Vector3f(np.ascontiguousarray(view.T, dtype=np.float32))
-    value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(np.ascontiguousarray(light.T, dtype=np.float32)))
+    view32 = np.ascontiguousarray(view.T, dtype=np.float32)
+    light32 = np.ascontiguousarray(light.T, dtype=np.float32)
+    si.wi = mi.Vector3f(view32)
+    value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(light32))
     f_cos = np.array(value, dtype=np.float64).reshape(3, light.shape[0]).T  # Color3f -> (3, N)
     cos_light = light[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
