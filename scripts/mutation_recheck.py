@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from mutation_report import NO_TESTS, SURVIVED, TIMEOUT, load_results  # noqa: E402
+from mutation_report import KILLED, NO_TESTS, SURVIVED, TIMEOUT, load_results  # noqa: E402
 
 TESTS_BY_PACKAGE = {
     "brdffit.models": ["tests/test_models_*.py"],
@@ -53,7 +53,8 @@ def main(argv: list[str]) -> int:
     shutil.copytree("tests", "mutants/tests", dirs_exist_ok=True)  # the tests as they are now
     done = json.loads(RECHECK.read_text()) if RECHECK.exists() else {}
     todo = [n for n, s in load_results(Path(".")).items()
-            if s in (SURVIVED, TIMEOUT, NO_TESTS) and done.get(n) not in ("killed", "timeout") and any(fnmatch.fnmatch(n, g) for g in globs)]
+            if s in (SURVIVED, TIMEOUT, NO_TESTS) and done.get(n) not in (KILLED, TIMEOUT)
+            and any(fnmatch.fnmatch(n, g) for g in globs)]
     clean_packages = set()
     for name in todo:
         pkg = ".".join(name.split(".")[:2])
@@ -63,7 +64,7 @@ def main(argv: list[str]) -> int:
                 return 1
             clean_packages.add(pkg)
         r = _pytest(name, only or test_files(name))
-        done[name] = "timeout" if r is None else "killed" if r.returncode == 1 else "survived"
+        done[name] = TIMEOUT if r is None else KILLED if r.returncode == 1 else SURVIVED
         print(f"{done[name]:<9} {name}", flush=True)
         RECHECK.write_text(json.dumps(done, indent=1))
     return 0

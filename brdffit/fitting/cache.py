@@ -175,10 +175,10 @@ def load_or_compile(key, build, example):
 
     def compile_salted(salt: int):
         """Compiled program returning (outputs, salt); and whether JAX's own cache handed it back."""
-        hits = _STATE.get("jax_hits", 0)
+        hits = _STATE["jax_hits"]
         compiled = jax.jit(lambda *flat: (fn(*jax.tree_util.tree_unflatten(treedef, flat)), jnp.int32(salt))
                            ).lower(*leaves).compile()
-        return compiled, _STATE.get("jax_hits", 0) != hits
+        return compiled, _STATE["jax_hits"] != hits
 
     # A program that JAX's own cache hands back runs, but serialised again it lacks its machine code
     # ("Function ... not found" in the next process; seen with jaxlib 0.10), so only a program
