@@ -33,6 +33,12 @@ _AT_FDCWD = -100
 #: targets this process holds a lock on: absolute path -> nesting count
 _HELD: dict[str, int] = {}
 _HELD_GUARD = threading.Lock()
+#: Set when the user asked this run to stop (the CLI's Ctrl-C handler sets it, then raises). The
+#: raised exception can be lost: Python only prints ("Exception ignored in ...") an exception raised
+#: inside a garbage-collection callback or a ``__del__``, and a signal's handler runs wherever the
+#: interpreter happens to be (seen: inside JAX's ``_xla_gc_callback``; the fit then went on and
+#: wrote its result). So nothing is committed once this is set, whatever became of the exception.
+STOP_REQUESTED = threading.Event()
 
 
 def _hidden(path: Path, what: str) -> str:
@@ -94,6 +100,8 @@ def _remove(path: Path) -> None:
 
 def _commit(tmp: Path, path: Path, force: bool) -> None:
     """Move the finished ``tmp`` onto ``path``; the target is never missing or partial."""
+    if STOP_REQUESTED.is_set():
+        raise KeyboardInterrupt  # the stop request's own exception was swallowed on the way
     if not (path.is_symlink() or path.exists()):
         if not _rename2(tmp, path, _RENAME_NOREPLACE):
             os.rename(tmp, path)
@@ -156,12 +164,7 @@ def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = 
         except OSError:
             raise UsageError(f"{path}: another brdffit run is writing it now") from None
         # its previous holder may have removed the lock file between our open() and flock()
-        mine = os.fstat(fd)
-        try:
-            now = os.stat(lock)
-        except FileNotFoundError:
-            now = None
-        if now is None or (now.st_ino, now.st_dev) != (mine.st_ino, mine.st_dev):
+        if not _same_file(fd, lock):
             raise UsageError(f"{path}: another brdffit run is writing it now")
         _clean_leftovers(path)
         check_target(path, force, folder)  # again, now that no other run can change it
@@ -171,9 +174,31 @@ def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = 
             yield path
         finally:
             with _HELD_GUARD:
-                del _HELD[key]
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(lock)  # still locked: a run that opened it meanwhile sees the inode change
+                _HELD.pop(key, None)
+    finally:
+        _release(fd, lock)
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    mine = os.fstat(fd)
+    try:
+        now = os.stat(path)
+    except FileNotFoundError:
+        return False
+    return (now.st_ino, now.st_dev) == (mine.st_ino, mine.st_dev)
+
+
+def _release(fd: int, lock: Path) -> None:
+    """Remove the lock file if this run holds its lock or can take it, then close it. Taking it
+    here covers a run interrupted between open() and flock(), which would otherwise leave the file
+    behind; a lock another run holds, or a file another run made since, is left alone. (A run that
+    opened the file meanwhile sees, once it has the lock, that the file at the path is not its own.)"""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if _same_file(fd, lock):
+            os.unlink(lock)
+    except OSError:
+        pass  # another run holds it, or it is gone already
     finally:
         os.close(fd)
 

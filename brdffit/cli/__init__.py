@@ -53,18 +53,33 @@ class Interrupted(BaseException):
 
 @contextlib.contextmanager
 def _interrupts_raise():
+    """Ctrl-C raises :class:`Interrupted` and sets ``STOP_REQUESTED``, which stops any result from
+    being committed even where the exception is swallowed (a signal landing in a garbage-collection
+    callback or a ``__del__``); ``main`` then reports the run as interrupted."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    from .._files import STOP_REQUESTED
 
     def on_sigint(signum, frame):
+        STOP_REQUESTED.set()
         raise Interrupted()
 
+    def quiet_about_swallowed_interrupts(unraisable):
+        if not isinstance(unraisable.exc_value, Interrupted):
+            previous_hook(unraisable)
+
+    STOP_REQUESTED.clear()
+    previous_hook, sys.unraisablehook = sys.unraisablehook, quiet_about_swallowed_interrupts
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
         yield
+        if STOP_REQUESTED.is_set():
+            raise Interrupted()  # the handler's exception was swallowed and the command ran to its end
     finally:
         signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = previous_hook
+        STOP_REQUESTED.clear()
 
 
 def check_model(name: str, channels: int = 3):
