@@ -16,8 +16,10 @@ def direct_mitsuba(path, light, view):
     from brdffit._mitsuba import mitsuba
 
     mi = mitsuba()
+    import drjit as dr
+
     bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
-    si = mi.SurfaceInteraction3f()
+    si = dr.zeros(mi.SurfaceInteraction3f, light.shape[0])  # every field defined, at the batch's width
     si.wi = mi.Vector3f(view[:, 0], view[:, 1], view[:, 2])
     value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(light[:, 0], light[:, 1], light[:, 2]))
     return np.stack([np.array(value[0]), np.array(value[1]), np.array(value[2])], axis=1) / light[:, 2:3]

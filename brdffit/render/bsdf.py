@@ -276,7 +276,9 @@ def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) 
             v = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
             out[k] = np.array([v[0], v[1], v[2]], np.float64)
     else:
-        si = mi.SurfaceInteraction3f()
+        import drjit as dr
+
+        si = dr.zeros(mi.SurfaceInteraction3f, n)  # every field defined, at the batch's width
         si.wi = mi.Vector3f(*(mi.Float(wo[:, c].astype(np.float32)) for c in range(3)))
         si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
         with evaluated_calls():
