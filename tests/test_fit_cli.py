@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +13,8 @@ import brdffit
 from brdffit import models
 from brdffit.cli import main
 from brdffit.grid import ubo_pairs
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -76,3 +80,36 @@ def test_compare_writes_report(ubo_npz, tmp_path):
     assert (out / "report.csv").read_text().count("\n") == 5
     assert (out / "pareto.png").stat().st_size > 10_000
     assert main(["compare", str(ubo_npz), "--models", "ggx", "--losses", "bad", "-o", str(tmp_path / "c2")]) == 2
+
+
+def test_background_import_returns_the_module_and_raises_its_failure_in_the_caller():
+    from brdffit.cli import BackgroundImport
+
+    assert BackgroundImport("brdffit.plot").module().fit_figure.__name__ == "fit_figure"
+    broken = BackgroundImport("brdffit._no_such_module")
+    with pytest.raises(ModuleNotFoundError, match="brdffit._no_such_module"):
+        broken.module()
+
+
+def test_background_import_is_not_waited_for_after_an_interrupt():
+    """Ctrl-C can land inside the import system and leave its lock held by the main thread; the
+    background import then waits for ever, so after an interrupt the command must not wait for it
+    (seen: ``brdffit fit`` hung after Ctrl-C). In a child process, since the old behaviour hangs."""
+    import subprocess
+    import sys
+
+    script = (
+        "import _imp, time\n"
+        "from brdffit.cli import BackgroundImport, Interrupted\n"
+        "from brdffit._files import STOP_REQUESTED\n"
+        "_imp.acquire_lock()  # left held, as an interrupt inside the import system can leave it\n"
+        "pending = BackgroundImport('brdffit._not_imported_yet')\n"
+        "STOP_REQUESTED.set()\n"
+        "try:\n"
+        "    pending.module()\n"
+        "except Interrupted:\n"
+        "    print('interrupted')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0 and done.stdout.strip() == "interrupted", done.stderr

@@ -229,6 +229,28 @@ def test_ctrl_c_swallowed_in_a_destructor_still_stops_the_run(tmp_path, monkeypa
     assert sys.unraisablehook is hook_before and signal.getsignal(signal.SIGINT) is handler_before  # both given back
 
 
+def test_ctrl_c_turned_into_another_error_is_still_an_interrupt(tmp_path, monkeypatch, capsys):
+    """A library may turn the interrupt's exception into its own (an extension module interrupted
+    in its initialisation raises "ImportError: initialization failed", which the EXR reader reports
+    as an unreadable file: seen as exit 2). After Ctrl-C any failure is the interrupt: exit 130."""
+    import brdffit.io as io
+    from brdffit.errors import InputError
+
+    def resample_that_wraps_errors(*a, **k):
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except BaseException as exc:  # as OpenEXR's import did
+            raise InputError(SAMPLE, f"cannot read as exr: ImportError: initialization failed ({exc!r})") from None
+        raise AssertionError("the interrupt was not raised")
+
+    monkeypatch.setattr(io, "resample", resample_that_wraps_errors)
+    code = main(["convert", str(SAMPLE), str(tmp_path / "t.npz")])
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert err.strip() == "brdffit: interrupted"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_interrupt_before_the_lock_is_taken_leaves_no_lock_file(tmp_path, monkeypatch):
     """Ctrl-C between creating the lock file and locking it (seen once in 7 interrupted fits):
     the run must still remove the file it created."""

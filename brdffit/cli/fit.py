@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
+from . import EXIT_NOT_CONVERGED, EXIT_OK, BackgroundImport, check_model, cli
 
 
 def parse_assignments(option: str, items, expect_pair: bool) -> dict:
@@ -86,8 +86,9 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
 
     from rich.console import Console
 
-    from .. import load, plot
     import contextlib
+
+    from .. import load
 
     from .._files import atomic_dir, reserve
     from ..fitting import fit
@@ -113,6 +114,9 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         if out is not None:  # checked, writable and locked before any work
             stack.enter_context(reserve(out, force, folder=True))
         status = stack.enter_context(console.status(f"reading {source}") if live else nullcontext())
+        # the figure's matplotlib is imported while the file is read and the fit runs
+        plot_import = BackgroundImport("brdffit.plot")
+        stack.callback(plot_import.wait)
         usage = None
         if scene is not None or material is not None:  # SPEC 12: scene-aware fit
             from ..scene.usage import cli_usage
@@ -135,7 +139,7 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         progress("writing fit.json, fit.png")
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
-            plot.fit_figure(m, r).savefig(tmp / "fit.png", dpi=110)
+            plot_import.module().fit_figure(m, r).savefig(tmp / "fit.png", dpi=110)
     console.print(repr(r), soft_wrap=True)
     for line in r.warnings:  # one line each, on stderr with the rest of the report
         console.print(f"warning: {line}", soft_wrap=True, markup=False, highlight=False)
