@@ -153,3 +153,32 @@ def test_unconstrained_roundtrip_and_samples_in_bounds(name):
     flo = np.concatenate([np.full(model.size(p), p.finite_range[0]) for p in model.params])
     corner = model.unflatten(flo)
     np.testing.assert_allclose(model.flatten(model.from_unconstrained(model.to_unconstrained(corner))), flo, atol=1e-12)
+
+
+def test_parameter_table_text_as_brdffit_models_prints_it():
+    """``Model.table()`` (what ``brdffit models`` prints), written out by hand from the parameter
+    tables of ggx.py and oren_nayar.py: columns aligned, bounds in the files' notation (pi/2, 1e-4,
+    inf with an open bracket), "yes" for the linear parameters, no trailing blanks."""
+    assert get("ggx").table() == (
+        "name   channels  bounds       physical   default  role       linear\n"
+        "kd     3         [0, inf)     [0, 1]     0.1      albedo     yes\n"
+        "ks     3         [0, inf)     [0, 1]     0.5      albedo     yes\n"
+        "alpha  1         [1e-4, inf)  [1e-4, 1]  0.2      roughness\n"
+        "f0     1         [0, 1]       [0, 1]     0.04     fresnel"
+    )
+    assert get("oren_nayar").table() == (
+        "name   channels  bounds    physical   default  role       linear\n"
+        "kd     3         [0, inf)  [0, 1]     0.5      albedo     yes\n"
+        "sigma  1         [0, inf)  [0, pi/2]  0.3      roughness"
+    )
+    assert get("lambert+ggx").table().splitlines()[2] == (
+        "ggx1.ks     3         [0, inf)     [0, 1]     0.5      albedo     yes"
+    )
+
+
+def test_model_repr_names_parameters_with_their_sizes_and_the_first_citation_line():
+    assert repr(get("oren_nayar")) == (
+        "Model('oren_nayar': kd(3), sigma; M. Oren, S. K. Nayar, Generalization of Lambert's Reflectance Model, "
+        "SIGGRAPH 1994)"
+    )
+    assert repr(get("ggx").with_channels(1)).startswith("Model('ggx': kd, ks, alpha, f0; Walter, Marschner")
