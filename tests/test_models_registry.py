@@ -182,3 +182,17 @@ def test_model_repr_names_parameters_with_their_sizes_and_the_first_citation_lin
         "SIGGRAPH 1994)"
     )
     assert repr(get("ggx").with_channels(1)).startswith("Model('ggx': kd, ks, alpha, f0; Walter, Marschner")
+
+
+@pytest.mark.parametrize(("lower", "upper", "text"), [
+    (-np.inf, np.inf, "(-inf, inf)"),  # both open; a lower bound of -inf is negative
+    (0.0, np.pi / 2, "[0, pi/2]"),
+    (1e-4, np.inf, "[1e-4, inf)"),
+    (0.01, 1e4, "[0.01, 1e4]"),  # 0.01 still plain, 1e4 already scientific
+    (-5e-3, 0.0099, "[-5e-3, 9.9e-3]"),
+    (1e-3, 9999.0, "[1e-3, 9999]"),
+])
+def test_format_range_is_the_notation_of_the_model_files(lower, upper, text):
+    from brdffit.models.base import format_range
+
+    assert format_range(lower, upper) == text
