@@ -149,3 +149,91 @@ def test_five_valid_samples_are_enough_and_interpolated_against_scipy():
     assert dict(r.extra)["resampled_from"] == "7 scattered samples (measurement)"
     with pytest.raises(InputError, match=f"^{re.escape('five.brdf: only 4 valid samples: too few to interpolate')}$"):
         interpolate_scattered(m.replace(weights=np.array([1.0, 1, 1, 1, 0, 0, 1])))
+
+
+def _ubo_index(theta_light, phi_light, theta_view, phi_view):
+    """Index of a UBO-81 pair, found by its directions (written out, not from the product's order)."""
+    wi, wo = ubo_pairs()
+    hit = np.flatnonzero((np.linalg.norm(wi - direction(theta_light, phi_light), axis=1) < 1e-12)
+                         & (np.linalg.norm(wo - direction(theta_view, phi_view), axis=1) < 1e-12))
+    assert hit.size == 1
+    return int(hit[0])
+
+
+@pytest.mark.parametrize("offset_rad", [0.0, 1e-10])
+def test_coincident_samples_are_averaged(offset_rad):
+    """Two samples at one direction pair (or 1e-10 rad apart: within the 1e-9 rad merge tolerance)
+    with values f - 1 and f + 1 among samples of a linear f: the grid pairs at that point get their
+    mean f, as a vertex of the interpolation (not f + 1, which an unmerged pair would give, nor a sum)."""
+    m, _ = scattered(theta_light_max=70.0, n=400, seed=3)
+    k = _ubo_index(30.0, 0.0, 45.0, 120.0)
+    wi, wo = ubo_pairs()
+    x = isotropic_coords(wi[k:k + 1], wo[k:k + 1])[0]
+    f = (1 + x[0] + x[1] + x[2] / 4) * np.array([1.0, 2.0, 3.0])
+    twin_view = direction(45.0 + np.degrees(offset_rad), 120.0)  # theta_view 1e-10 rad away
+    assert np.round(isotropic_coords(wi[k:k + 1], twin_view[None])[0, 1], 9) == np.round(x[1], 9)
+    both = brdffit.Measurement(
+        wi=np.concatenate([np.asarray(m.wi), wi[k:k + 1], wi[k:k + 1]]),
+        wo=np.concatenate([np.asarray(m.wo), wo[k:k + 1], twin_view[None]]),
+        values=np.concatenate([np.asarray(m.values), [f - 1.0], [f + 1.0]]), name="twins")
+    r = interpolate_scattered(both, reciprocal=False)
+    same_point = np.all(np.abs(isotropic_coords(wi, wo) - x) < 1e-12, axis=1)
+    assert same_point.sum() >= 2  # the pair and its rotations about the normal
+    np.testing.assert_allclose(np.asarray(r.values)[same_point], np.broadcast_to(f, (same_point.sum(), 3)), rtol=1e-6)
+
+
+def test_samples_covering_every_grid_point_need_no_extrapolation():
+    """Scattered samples at every UBO-81 pair (grid not declared) and beyond it (theta 85 degrees,
+    and 0.001 degrees off the pole, so that no grid point lies on an outer edge of the hull, where the
+    1e-9 rad merge rounding could leave it just outside): nothing is extrapolated, the largest
+    extrapolation is 0 degrees, the values come back, and the colour space and units carry over."""
+    wi, wo = ubo_pairs()
+    ring = np.arange(0.0, 76.0, 15.0)
+    dphi = np.arange(0.0, 181.0, 15.0)
+    beyond = np.array([(a, b, d) for d in dphi for a in [*ring, 85.0] for b in [*ring, 85.0] if 85.0 in (a, b)]
+                      + [(0.0, 1e-3, d) for d in dphi])  # and views just off the pole at every dphi (with
+    # reciprocity, lights too): the grid's pole pairs then lie inside, not on an edge of the hull
+    wi = np.concatenate([wi, direction(beyond[:, 0], np.zeros(len(beyond)))])
+    wo = np.concatenate([wo, direction(beyond[:, 1], beyond[:, 2])])
+    x = isotropic_coords(wi, wo)
+    values = (0.5 + 0.7 * (x[:, 0] + x[:, 1]) + 0.3 * x[:, 2])[:, None]
+    m = brdffit.Measurement(wi=wi, wo=wo, values=values, name="all", colour_space="acescg", units="arbitrary")
+    r = interpolate_scattered(m)
+    extra = dict(r.extra)
+    assert extra["extrapolated"] == 0 and extra["max_extrapolation_deg"] == 0.0 and extra["max_gap_deg"] < 1e-6
+    np.testing.assert_allclose(np.asarray(r.values), values[:6561], rtol=1e-8)
+    assert np.all(np.asarray(r.weights) == 1.0)
+    assert (r.colour_space, r.units, r.grid) == ("acescg", "arbitrary", "ubo81")  # carried over
+
+
+def _samples_at(deg):
+    """Measurement with one sample per (theta_light, theta_view, dphi) row of ``deg`` (degrees)."""
+    deg = np.asarray(deg, np.float64)
+    wi = direction(deg[:, 0], np.zeros(len(deg)))
+    wo = direction(deg[:, 1], deg[:, 2])
+    return brdffit.Measurement(wi=wi, wo=wo, values=np.ones((len(deg), 1)), name="few"), np.radians(deg)
+
+
+def test_four_distinct_points_after_merging_are_enough_three_are_not():
+    four = [[10, 20, 30], [60, 20, 30], [10, 70, 30], [10, 20, 150], [60, 20, 30]]  # 5 samples, 4 distinct
+    r = interpolate_scattered(_samples_at(four)[0], reciprocal=False)
+    assert np.all(np.isfinite(np.asarray(r.values)))
+    three = [[10, 20, 30], [60, 20, 30], [10, 70, 30], [10, 70, 30], [60, 20, 30]]  # 5 samples, 3 distinct
+    with pytest.raises(InputError) as info:
+        interpolate_scattered(_samples_at(three)[0], reciprocal=False)
+    assert str(info.value).endswith("cannot interpolate them onto the UBO-81 grid (fewer than 4 distinct points)")
+
+
+def test_qhull_refusal_quotes_the_first_80_characters_of_scipy_message():
+    """Distinct samples all in the plane dphi = 30 degrees: Qhull refuses them. The message quotes
+    scipy's own error (whitespace collapsed) cut at 80 characters."""
+    from scipy.spatial import QhullError
+
+    m, x = _samples_at([[10, 20, 30], [60, 20, 30], [10, 70, 30], [40, 50, 30], [25, 35, 30], [70, 65, 30]])
+    with pytest.raises(QhullError) as scipy_error:
+        LinearNDInterpolator(np.round(x, 9), np.ones(len(x)))
+    expected = " ".join(str(scipy_error.value).split())[:80]
+    assert len(expected) == 80
+    with pytest.raises(InputError) as info:
+        interpolate_scattered(m, reciprocal=False)
+    assert str(info.value).endswith(f"cannot interpolate them onto the UBO-81 grid ({expected})")
