@@ -9,6 +9,7 @@ import math
 import re
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -380,3 +381,30 @@ def test_only_lobes_of_one_kind_are_interchangeable():
     order = ParameterSpace.build(models.get("ggx+ggx+blinn_phong+blinn_phong")).order
     assert [[lobe.params[0] for lobe in group] for group in order] == [["ggx1.ks", "ggx2.ks"],
                                                                        ["blinn_phong1.ks", "blinn_phong2.ks"]]
+
+
+def test_fold_reflects_into_the_bounds_by_hand():
+    """``models.base._fold``: x folded onto [a, b] by reflection at the bounds (period 2 (b - a)),
+    one reflection for one finite bound, the identity for none, the bound itself for a = b; bounds
+    given per element. Expected values worked out by hand; the slope is +-1 everywhere, also at the
+    bounds, and never NaN (infinite bounds included)."""
+    from brdffit.models.base import _fold
+
+    inf = np.inf
+    cases = [  # (x, a, b, folded)
+        (0.25, 0.0, 1.0, 0.25), (1.25, 0.0, 1.0, 0.75), (2.5, 0.0, 1.0, 0.5), (-0.25, 0.0, 1.0, 0.25),
+        (-1.5, 0.0, 1.0, 0.5), (3.75, 0.0, 1.0, 0.25), (9.0, 2.0, 5.0, 3.0), (-4.0, 2.0, 5.0, 2.0),
+        (-2.0, 1.0, inf, 4.0), (3.0, 1.0, inf, 3.0), (5.0, -inf, 2.0, -1.0), (0.0, -inf, 2.0, 0.0),
+        (7.0, -inf, inf, 7.0), (3.0, 1.0, 1.0, 1.0), (-3.0, 1.0, 1.0, 1.0), (6.5, 2.0, 5.0, 3.5),
+        (1.0, -inf, 2.0, 1.0),
+    ]
+    x, a, b, expected = (np.array(c, np.float64) for c in zip(*cases))
+    np.testing.assert_allclose(np.asarray(_fold(jnp.asarray(x), jnp.asarray(a), jnp.asarray(b))), expected,
+                               rtol=0, atol=1e-12)
+    for xi, ai, bi, want in cases:  # scalars too
+        assert float(_fold(xi, ai, bi)) == pytest.approx(want, abs=1e-12)
+    slope = jax.vmap(jax.grad(_fold), in_axes=(0, 0, 0))
+    at = np.array([0.0, 1.0, 0.5, 1.0, 2.0, 7.0])
+    lo = np.array([0.0, 0.0, 0.0, 1.0, -inf, -inf])
+    hi = np.array([1.0, 1.0, 1.0, inf, 2.0, inf])
+    np.testing.assert_array_equal(np.abs(np.asarray(slope(jnp.asarray(at), jnp.asarray(lo), jnp.asarray(hi)))), 1.0)
