@@ -34,7 +34,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
-from ..models.base import Model
+from ..models.base import Model, _fold
 from . import losses as L
 from .linalg import inverse_quadratic_form, spd_solve
 from .problem import Data, flat_residual
@@ -207,14 +207,7 @@ def to_box(x, lo, hi):
     log = _log_axis(lo)
     a = jnp.where(log, jnp.log(jnp.where(log, lo, 1.0)), lo)
     b = jnp.where(log, jnp.log(jnp.where(log, hi, 1.0)), hi)
-    fa, fb = jnp.isfinite(a), jnp.isfinite(b)
-    a0 = jnp.where(fa, a, 0.0)
-    b0 = jnp.where(fb, b, 0.0)
-    width = jnp.where(fa & fb, b0 - a0, 1.0)
-    m = jnp.mod(x - a0, 2 * width)
-    folded = a0 + jnp.where(m <= width, m, 2 * width - m)
-    folded = jnp.where(width > 0, folded, a0)
-    y = jnp.where(fa & fb, folded, jnp.where(fa, a0 + jnp.abs(x - a0), jnp.where(fb, b0 - jnp.abs(b0 - x), x)))
+    y = _fold(x, a, b)  # the models' own fold (one definition)
     return jnp.where(log, jnp.exp(y), y)
 
 
