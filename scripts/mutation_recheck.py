@@ -59,7 +59,12 @@ def main(argv: list[str]) -> int:
     for name in todo:
         pkg = ".".join(name.split(".")[:2])
         if pkg not in clean_packages:  # a test failing without any mutant would "kill" every one
-            if _pytest("", only or test_files(name)).returncode != 0:
+            clean = _pytest("", only or test_files(name))
+            if clean is None:
+                print(f"the {pkg} tests ran past RECHECK_TIMEOUT without a mutant; nothing rechecked "
+                      "(raise RECHECK_TIMEOUT or name fewer test files)", file=sys.stderr)
+                return 1
+            if clean.returncode != 0:
                 print(f"the {pkg} tests fail without a mutant; nothing rechecked", file=sys.stderr)
                 return 1
             clean_packages.add(pkg)
