@@ -12,7 +12,7 @@ from scipy.spatial import ConvexHull, Delaunay
 
 import brdffit
 from brdffit.errors import InputError, UsageError
-from brdffit.grid import ubo_pairs
+from brdffit.grid import ubo_index, ubo_pairs
 from brdffit.io.resampling import interpolate_scattered, isotropic_coords, resample
 
 
@@ -151,22 +151,13 @@ def test_five_valid_samples_are_enough_and_interpolated_against_scipy():
         interpolate_scattered(m.replace(weights=np.array([1.0, 1, 1, 1, 0, 0, 1])))
 
 
-def _ubo_index(theta_light, phi_light, theta_view, phi_view):
-    """Index of a UBO-81 pair, found by its directions (written out, not from the product's order)."""
-    wi, wo = ubo_pairs()
-    hit = np.flatnonzero((np.linalg.norm(wi - direction(theta_light, phi_light), axis=1) < 1e-12)
-                         & (np.linalg.norm(wo - direction(theta_view, phi_view), axis=1) < 1e-12))
-    assert hit.size == 1
-    return int(hit[0])
-
-
 @pytest.mark.parametrize("offset_rad", [0.0, 1e-10])
 def test_coincident_samples_are_averaged(offset_rad):
     """Two samples at one direction pair (or 1e-10 rad apart: within the 1e-9 rad merge tolerance)
     with values f - 1 and f + 1 among samples of a linear f: the grid pairs at that point get their
     mean f, as a vertex of the interpolation (not f + 1, which an unmerged pair would give, nor a sum)."""
     m, _ = scattered(theta_light_max=70.0, n=400, seed=3)
-    k = _ubo_index(30.0, 0.0, 45.0, 120.0)
+    k = ubo_index(30.0, 0.0) * 81 + ubo_index(45.0, 120.0)  # SPEC 1: light-major pairs
     wi, wo = ubo_pairs()
     x = isotropic_coords(wi[k:k + 1], wo[k:k + 1])[0]
     f = (1 + x[0] + x[1] + x[2] / 4) * np.array([1.0, 2.0, 3.0])
