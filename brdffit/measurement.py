@@ -7,9 +7,10 @@ a UBO table keeps its 81 x 81 shape).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
-import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -30,24 +31,32 @@ def _freeze(extra) -> tuple[tuple[str, Any], ...]:
     return tuple(sorted((str(k), v) for k, v in items))
 
 
-class Measurement(eqx.Module):
+_ARRAYS = ("wi", "wo", "values", "weights")
+_METADATA = ("name", "source", "grid", "colour_space", "units", "extra")
+
+
+# A frozen dataclass registered as a pytree by hand rather than an equinox Module: equinox's
+# import (~0.2 s) was the largest part of `brdffit fit`'s imports after JAX's that the command
+# does not otherwise need (optimistix, and so equinox, load only when a fit is compiled).
+@dataclasses.dataclass(frozen=True, init=False, eq=False, repr=False)
+class Measurement:
     """Tabulated or scattered BRDF samples.
 
     ``Measurement(wi=..., wo=..., values=...)`` with optional ``weights`` (default 1) and metadata.
     It is immutable and a JAX pytree: the arrays are leaves, the metadata is static.
     """
 
-    wi: Float[Array, "N 3"] = eqx.field(converter=_as_float_array)
-    wo: Float[Array, "N 3"] = eqx.field(converter=_as_float_array)
-    values: Float[Array, "N C"] = eqx.field(converter=_as_float_array)
-    weights: Float[Array, " N"] = eqx.field(converter=_as_float_array, default=None)
-    name: str = eqx.field(static=True, default="measurement")
-    source: str = eqx.field(static=True, default="")
-    grid: str | None = eqx.field(static=True, default=None)
-    colour_space: str = eqx.field(static=True, default="linear_rec709")
-    units: str = eqx.field(static=True, default="1/sr")
+    wi: Float[Array, "N 3"]
+    wo: Float[Array, "N 3"]
+    values: Float[Array, "N C"]
+    weights: Float[Array, " N"]
+    name: str
+    source: str
+    grid: str | None
+    colour_space: str
+    units: str
     #: Further metadata as sorted (key, value) pairs, e.g. the reader's options; see ``.meta``.
-    extra: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=(), converter=_freeze)
+    extra: tuple[tuple[str, Any], ...]
 
     def __init__(
         self,
@@ -63,21 +72,17 @@ class Measurement(eqx.Module):
         units: str = "1/sr",
         extra=None,
     ):
-        values = jnp.asarray(values)
+        values = _as_float_array(values)
         if values.ndim == 1:
             values = values[:, None]
-        self.wi = wi
-        self.wo = wo
-        self.values = values
-        self.weights = jnp.ones(values.shape[0]) if weights is None else weights
-        self.name = name
-        self.source = source
-        self.grid = grid
-        self.colour_space = colour_space
-        self.units = units
-        self.extra = extra
-
-    def __check_init__(self):
+        fields = {
+            "wi": _as_float_array(wi), "wo": _as_float_array(wo), "values": values,
+            "weights": _as_float_array(jnp.ones(values.shape[0]) if weights is None else weights),
+            "name": name, "source": source, "grid": grid, "colour_space": colour_space, "units": units,
+            "extra": _freeze(extra),
+        }
+        for key, value in fields.items():
+            object.__setattr__(self, key, value)
         n = self.values.shape[0]
         if self.wi.shape != (n, 3) or self.wo.shape != (n, 3):
             raise ValueError(
@@ -87,6 +92,16 @@ class Measurement(eqx.Module):
             raise ValueError(f"weights {self.weights.shape} must be ({n},)")
         if self.grid == "ubo81" and n != UBO_SIZE * UBO_SIZE:
             raise ValueError(f"a ubo81 measurement has {UBO_SIZE * UBO_SIZE} samples, not {n}")
+
+    def __eq__(self, other: object) -> bool:
+        """Same metadata and the same array values (shapes included)."""
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(getattr(self, k) == getattr(other, k) for k in _METADATA) and all(
+            np.array_equal(np.asarray(getattr(self, k)), np.asarray(getattr(other, k))) for k in _ARRAYS
+        )
+
+    __hash__ = None  # holds arrays
 
     # -- convenience -----------------------------------------------------------------------------
     @property
@@ -140,3 +155,21 @@ class Measurement(eqx.Module):
             f"Measurement(name={self.name!r}, samples={self.n_samples}, channels={self.n_channels}, "
             f"grid={self.grid!r}, source={self.source!r})"
         )
+
+
+def _flatten_with_keys(m: Measurement):
+    return tuple((jax.tree_util.GetAttrKey(k), getattr(m, k)) for k in _ARRAYS), tuple(getattr(m, k) for k in _METADATA)
+
+
+def _unflatten(metadata, arrays) -> Measurement:
+    # As JAX rebuilds it inside transformations: leaves may be tracers, None or axis numbers, so
+    # neither the conversion nor the shape checks of __init__ apply.
+    m = object.__new__(Measurement)
+    for key, value in zip(_ARRAYS + _METADATA, (*arrays, *metadata)):
+        object.__setattr__(m, key, value)
+    return m
+
+
+jax.tree_util.register_pytree_with_keys(
+    Measurement, _flatten_with_keys, _unflatten, lambda m: (tuple(getattr(m, k) for k in _ARRAYS),
+                                                           tuple(getattr(m, k) for k in _METADATA)))

@@ -83,6 +83,13 @@ def log_rmse(f, ref, cos_i, used):
     return jnp.sqrt(jnp.sum(ld**2) / jnp.maximum(n, 1))
 
 
+def masked_log_residual(f, ref, cos_i, used):
+    """(:func:`log_residual`, :func:`log_rmse` over ``used``) for the table figures: samples
+    outside ``used`` enter neither, whatever they hold (NaN for an excluded measurement)."""
+    inside = used > 0
+    return log_residual(f, ref, cos_i), log_rmse(jnp.where(inside, f, 0.0), jnp.where(inside, ref, 0.0), cos_i, used)
+
+
 def reference_transform(loss: str, ref, cos_i, floor):
     """g(f_ref) of a transform loss (None for ``relative``): the same at every step of a fit, so a
     solver computes it once and hands it to :func:`residual`."""
