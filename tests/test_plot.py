@@ -130,10 +130,20 @@ def test_every_81x81_display_has_the_same_ring_ticks_and_units():
     centres = (0.0, 3.5, 12.5, 27.5, 46.5, 68.5)
     labels = ("0°", "15°", "30°", "45°", "60°", "75°")
     ticks = set()
-    for fig in (bp.table(m), bp.table(fit_result()), bp.compare_table(m, fit_result()), bp.fit_figure(m, fit_result())):
+    grey = Measurement(m.wi, m.wo, np.asarray(m.values)[:, :1], name="grey", grid="ubo81")
+    grey_fit = np.asarray(grey.values).reshape(81, 81, 1) * 1.01  # one residual panel: none under "fitted"
+    for fig in (bp.table(m), bp.table(fit_result()), bp.compare_table(m, fit_result()), bp.fit_figure(m, fit_result()),
+                bp.compare_table(grey, grey_fit)):
         panels = [ax for ax in fig.axes if ax.get_images()]
         for ax in panels:
-            ticks.add(tuple(ax.get_xticks()) + tuple(t.get_text() for t in ax.get_xticklabels()))
+            view = tuple(ax.get_xticks()) + tuple(t.get_text() for t in ax.get_xticklabels())
+            if view:
+                ticks.add(view)
+                assert ax.get_xlabel().startswith("view θ ring")
+            else:  # only above a panel of the same column that labels the view rings
+                column = [a for a in panels if np.isclose(a.get_position().x0, ax.get_position().x0)]
+                last = min(column, key=lambda a: a.get_position().y0)
+                assert last is not ax and tuple(last.get_xticks()) == centres and ax.get_xlabel() == ""
             light = tuple(ax.get_yticks()) + tuple(t.get_text() for t in ax.get_yticklabels())
             if light:
                 ticks.add(light)
@@ -250,3 +260,33 @@ print("ok")
 def test_figures_show_themselves_in_jupyter():
     fig = bp.table(measurement())
     assert fig._repr_png_().startswith(b"\x89PNG")
+
+
+def _zlib_level_class(png: bytes) -> int:
+    """FLEVEL of the first IDAT chunk's zlib header (RFC 1950): 0 fastest, 1 fast (levels 2-5),
+    2 default (6), 3 maximum (7-9)."""
+    import struct
+
+    pos = 8  # after the signature
+    while pos < len(png):
+        length, kind = struct.unpack(">I4s", png[pos:pos + 8])
+        if kind == b"IDAT":
+            return png[pos + 9] >> 6  # second byte of the zlib stream: FLG
+        pos += 12 + length
+    raise AssertionError("no IDAT chunk")
+
+
+def test_figures_write_pngs_at_the_documented_compression_and_other_formats_unchanged(tmp_path):
+    import io
+
+    fig = bp.table(measurement())
+    fig.savefig(tmp_path / "t.png", dpi=30)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=30)
+    assert bp.PNG_COMPRESS_LEVEL == 3
+    assert _zlib_level_class((tmp_path / "t.png").read_bytes()) == _zlib_level_class(buf.getvalue()) == 1
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=30, pil_kwargs={"compress_level": 9})  # the caller's choice wins
+    assert _zlib_level_class(buf.getvalue()) == 3
+    fig.savefig(tmp_path / "t.pdf")  # no PNG options passed to another backend
+    assert (tmp_path / "t.pdf").read_bytes().startswith(b"%PDF")

@@ -230,7 +230,7 @@ def validate(
                 tag = _tag(d)
                 fig = plot.sphere_panel(ref_imgs[k], fit_imgs[k], d, metrics=per_light[k], scale=scales[k],
                                         ref_label=ref_src.label, fit_label=fit_src.label, irradiance=irradiance)
-                fig.savefig(tmp / f"panel_{tag}.png", dpi=90, pil_kwargs={"compress_level": 1})
+                fig.savefig(tmp / f"panel_{tag}.png", dpi=90)
                 files.append(Path(out) / f"panel_{tag}.png")
                 tell("panels", k + 1, len(dirs) + 1)
         overall = summarise(per_light, ref_imgs, fit_imgs, mask)
@@ -249,7 +249,7 @@ def validate(
             fig = plot.compare_table(tab_ref, tab_fit, title=(
                 f"UBO-81 table, {fit_src.label} against {ref_src.label}: RMSE {table['rmse']:.3g} 1/sr   "
                 f"rel. RMSE {table['relative_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
-            fig.savefig(tmp / "table.png", dpi=90, pil_kwargs={"compress_level": 1})
+            fig.savefig(tmp / "table.png", dpi=90)
             files.append(Path(out) / "table.png")
             tell("panels", len(dirs) + 1, len(dirs) + 1)
             lap("metrics and panels")
