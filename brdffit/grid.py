@@ -6,8 +6,13 @@ from z, phi the azimuth from x, counter-clockwise seen from above. Arrays hold r
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jaxtyping import Float
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 #: Polar angles of the six UBO rings, degrees.
 UBO_THETA_DEG: tuple[int, ...] = (0, 15, 30, 45, 60, 75)

@@ -8,14 +8,16 @@ a UBO table keeps its 81 x 81 shape).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from .grid import UBO_SIZE
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Float
 
 
 def _as_float_array(x) -> Array:

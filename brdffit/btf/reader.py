@@ -21,6 +21,8 @@ folder (it is keyed by the source's path, size, modification time and the option
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dataclasses
 import functools
 import hashlib
@@ -34,12 +36,15 @@ import zipfile
 from pathlib import Path, PurePosixPath
 
 import numpy as np
-from jaxtyping import Float
 
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..io import images as _images
 from ..measurement import Measurement
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 N_PAIRS = UBO_SIZE * UBO_SIZE
 #: Default tile edge in texels (a tile is the unit of streaming, fitting and resuming).

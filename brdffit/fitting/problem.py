@@ -8,19 +8,23 @@ directions / values, so no NaN can leak from them into a residual or a gradient.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dataclasses
 import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from ..errors import UsageError
 from ..measurement import Measurement
 from ..models import get as get_model
 from ..models.base import Model
 from . import losses as L
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Float
 
 
 class Data(tuple):

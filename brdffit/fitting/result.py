@@ -6,14 +6,17 @@ import dataclasses
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from jaxtyping import Float
 
 from ..errors import InputError
 from ..models.base import Model
 from .fitfile import check_fit_document, parse_fit_text
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 FORMAT = "brdffit.fit/1"
 

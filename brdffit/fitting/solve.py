@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import equinox as eqx
 import jax
@@ -31,7 +31,6 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int
 
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, SOLVERS  # noqa: F401
 from ..models.base import Model, _fold
@@ -41,6 +40,10 @@ from .problem import Data, flat_residual
 # Re-exported: solver names, statuses and the compile cache live where no optimistix import is
 # needed (a second process runs a cached program without importing optimistix).
 from .program import COMPILED_SOLVERS, STATUS_TEXT, check_solver, compiled  # noqa: F401
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Bool, Float, Int
+
 
 def _status_code(result) -> jax.Array:
     """optimistix RESULTS -> int: 0 ok, 1 max steps, 2 diverged, 3 non-finite, 4 other."""

@@ -27,16 +27,20 @@ The loss enters through g'(f) (every loss is elementwise in f): J = diag(dr/df) 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from ..models.base import Model
 from . import losses as L
 from .problem import Data, flat_residual
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Float
 
 
 def compression(model: Model) -> np.ndarray:

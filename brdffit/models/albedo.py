@@ -10,14 +10,18 @@ resolution Lambert's albedo comes out within ~1e-3 of kd at 89 degrees (see test
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from .base import Model, Params
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Float
 
 
 @functools.lru_cache(maxsize=16)

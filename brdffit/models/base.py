@@ -41,15 +41,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
-Params = Mapping[str, Array]
-Formula = Callable[[Params, Array, Array], Array]
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Array, Float
+
+
+Params = Mapping[str, jax.Array]  # jaxtyping's Array is this one
+Formula = Callable[[Params, jax.Array, jax.Array], jax.Array]
 
 
 def _fold(x, a, b):

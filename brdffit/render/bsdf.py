@@ -24,6 +24,8 @@ that converts between the two.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import functools
 import threading
 import time
@@ -31,9 +33,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from jaxtyping import Float
 
 from .._mitsuba import evaluated_calls, mitsuba
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 #: f_r(wi = towards light, wo = towards viewer) in the local frame -> (N, 3) in 1/sr, NumPy.
 BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]

@@ -22,11 +22,16 @@ silhouette, not in the middle of the image.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jaxtyping import Float
 
 from .._mitsuba import mitsuba
 from .bsdf import Source, as_source, evaluated_calls
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 #: Samples per pixel (stratified over the pixel footprint) for ``render_sphere``.
 DEFAULT_SPP = 4

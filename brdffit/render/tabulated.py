@@ -19,10 +19,15 @@ Absolute azimuths are interpolated (no isotropy assumed), so anisotropic tables 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jaxtyping import Float
 
 from ..grid import UBO_PHI_STEP_DEG, UBO_SIZE, UBO_THETA_DEG
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 _THETA = np.deg2rad(np.asarray(UBO_THETA_DEG, np.float64))
 _STEP = np.deg2rad(np.asarray(UBO_PHI_STEP_DEG, np.float64))

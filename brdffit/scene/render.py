@@ -13,18 +13,23 @@ with the tone mapping of :mod:`brdffit.render.metrics`; the settings; the time p
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dataclasses
 import json
 import time
 from pathlib import Path
 
 import numpy as np
-from jaxtyping import Float
 
 from .._mitsuba import mitsuba
 from ..errors import UsageError
 from ._drjit import python_bsdf_render
 from .load import LoadedScene, load_scene, replaced, scene_name
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 #: Samples per pixel of a scene render.
 DEFAULT_SPP = 64

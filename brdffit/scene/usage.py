@@ -35,17 +35,22 @@ Weights for a measurement: :meth:`Usage.weights`.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dataclasses
 import re
 import time
 
 import numpy as np
-from jaxtyping import Float
 
 from .._mitsuba import mitsuba
 from ..errors import UsageError
 from ._drjit import python_bsdf_render
 from .load import load_scene, replaced, scene_name
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
+
 
 #: Weight of the pairs the scene does not use, relative to its most used ones. Measured with
 #: benchmarks/bench_scene.py (grazing floor, 4 RGL materials, ggx): at 0.3 the scene's FLIP
