@@ -94,7 +94,7 @@ class ParameterSpace:
         lo, hi = lo.copy(), hi.copy()
         free = np.ones(lo.shape, bool)
         values = np.full(lo.shape, np.nan)
-        slices = dict(_slices(model))
+        slices = dict(model.slices())
         for name, box in bounds.items():
             s = slices[name]
             if isinstance(box, str) or not hasattr(box, "__len__") or len(box) != 2:
@@ -126,7 +126,7 @@ class ParameterSpace:
         return dataclasses.replace(space, order=space._interchangeable_groups())
 
     def _interchangeable_groups(self) -> tuple[tuple[Lobe, ...], ...]:
-        slices = dict(_slices(self.model))
+        slices = dict(self.model.slices())
         by_kind: dict[str, list[Lobe]] = {}
         for lobe in self.model.lobes:
             by_kind.setdefault(lobe.kind, []).append(lobe)
@@ -171,7 +171,7 @@ class ParameterSpace:
         perm = np.arange(v.shape[0])
         if not self.order:
             return perm
-        slices = dict(_slices(self.model))
+        slices = dict(self.model.slices())
         params = {name: v[s] for name, s in slices.items()}
         source_perm = perm.copy()
         for group in self.order:
@@ -194,7 +194,7 @@ class ParameterSpace:
         on_lo = self.free & np.isfinite(self.lo) & (v <= self.lo + tol)
         on_hi = self.free & np.isfinite(self.hi) & (v >= self.hi - tol) & ~on_lo
         out = {}
-        for name, s in _slices(self.model):
+        for name, s in self.model.slices():
             lo_c, hi_c = np.flatnonzero(on_lo[s]), np.flatnonzero(on_hi[s])
             n = s.stop - s.start
             parts = []
@@ -219,16 +219,8 @@ class ParameterSpace:
         return "the formula's limit"
 
     def describe_bound(self, name: str, side: str) -> float:
-        s = dict(_slices(self.model))[name]
+        s = dict(self.model.slices())[name]
         return float((self.lo if side == "lower" else self.hi)[s][0])
-
-
-def _slices(model: Model):
-    i = 0
-    for p in model.params:
-        n = model.size(p)
-        yield p.name, slice(i, i + n)
-        i += n
 
 
 # -- warnings (SPEC 5: one sentence each) ------------------------------------------------------------
@@ -261,7 +253,7 @@ def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float]]:
     """(lobe, half width at half maximum in radians) for every lobe whose kind declares one."""
     from ..models import get
 
-    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in _slices(model)}
+    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in model.slices()}
     out = []
     for lobe in model.lobes:
         try:
@@ -305,7 +297,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
                     f"at half maximum, samples {math.degrees(spacing):.3g} degrees apart): the samples see "
                     "little more than its peak, so its width and scale are poorly determined."
                 )
-    free_names = {name for name, s in _slices(space.model) if space.free[s].any()}
+    free_names = {name for name, s in space.model.slices() if space.free[s].any()}
     for name in space.model.param_names:
         if name in free_names and name not in at_bound and name in stderr and stderr[name] is None:
             out.append(f"{name} is not determined by the data (it trades off against other parameters; no standard error).")

@@ -21,19 +21,18 @@ Where a bound is infinite, code that needs a finite box -- random parameters (``
 the stress checks of ``brdffit.testing``, the start grid -- uses the physical range on that side
 (``Param.finite_range``).
 
-Unconstrained vector (what a solver sees)
------------------------------------------
-``model.to_unconstrained(params)`` / ``model.from_unconstrained(x)`` map between the params dict and
-a flat vector. Each parameter lives in its box [lower, upper], on a linear axis, or on a log axis
-(``scale="log"``, automatic for a positive lower bound with an upper bound >= 100 times larger or
-infinite: roughness, exponents) so that the solver's steps are relative. The map from R to the box
-is a *fold* (a triangle wave: reflect at each finite bound; one reflection for a one-sided box,
-the identity for R), not a sigmoid: a sigmoid's derivative vanishes towards the bounds, and a
-solver whose optimum lies at a bound (kd = 0 for a metal, f0 = 1) crawls there. The fold has slope
-+-1 everywhere, so the bound is reached in one step and left again if the data want. On the box
-itself the two maps are exact inverses (a bijection box <-> box); outside it the solver's iterate
-is folded back, so the model never sees a parameter out of bounds. Both maps take optional flat
-``lo, hi`` arrays (a ``ParameterSpace``'s, with overrides) in place of the declared bounds.
+Axes and the fold
+-----------------
+Each parameter lives in its box [lower, upper], on a linear axis or on a log axis (``scale="log"``,
+automatic for a positive lower bound with an upper bound >= 100 times larger or infinite:
+roughness, exponents): random parameters (``Model.sample``) are uniform on that axis. The solvers
+keep their iterates in the box themselves (``brdffit.fitting.solve``: the default ``lm`` clips each
+trial point; optimistix's stock solvers move an unconstrained variable mapped into the box by
+``solve.to_box``). That map is :func:`_fold`, a triangle wave (reflect at each finite bound; one
+reflection for a one-sided box, the identity for R), not a sigmoid: a sigmoid's derivative
+vanishes towards the bounds, and a solver whose optimum lies at a bound (kd = 0 for a metal,
+f0 = 1) crawls there. The fold has slope +-1 everywhere, so the bound is reached in one step and
+left again if the data want.
 """
 
 from __future__ import annotations
@@ -144,17 +143,6 @@ class Param:
         if self.scale == "log":
             return jnp.log(lower), jnp.log(upper)
         return lower, upper
-
-    def to_axis(self, value, lower=None, upper=None):
-        lower = self.lower if lower is None else lower
-        upper = self.upper if upper is None else upper
-        value = jnp.clip(value, lower, upper)
-        return jnp.log(value) if self.scale == "log" else value
-
-    def from_axis(self, x, lower=None, upper=None):
-        a, b = self._axis_bounds(lower, upper)
-        y = _fold(x, a, b)
-        return jnp.exp(y) if self.scale == "log" else y
 
 
 @dataclasses.dataclass(frozen=True)
@@ -275,28 +263,14 @@ class Model:
         f = self.formula(params, wi, wo)
         return jnp.broadcast_to(f, (wi.shape[0], self.channels))
 
-    # -- solver's view ------------------------------------------------------------------------------
-    def _slices(self):
+    # -- the flat vector ----------------------------------------------------------------------------
+    def slices(self):
+        """(parameter name, its slice of the flat vector), in the order of :meth:`flatten`."""
         i = 0
         for p in self.params:
             n = self.size(p)
-            yield p, slice(i, i + n)
+            yield p.name, slice(i, i + n)
             i += n
-
-    def to_unconstrained(self, params: Params, lo=None, hi=None) -> Float[Array, " P"]:
-        """Params -> the solver's axes; ``lo, hi``: flat bounds (default: the declared ones)."""
-        params = self.check_params(params)
-        return jnp.concatenate([
-            p.to_axis(params[p.name], None if lo is None else lo[s], None if hi is None else hi[s])
-            for p, s in self._slices()
-        ])
-
-    def from_unconstrained(self, x: Float[Array, " P"], lo=None, hi=None) -> dict[str, Array]:
-        """The solver's axes -> params, folded into the box (declared bounds or flat ``lo, hi``)."""
-        return {
-            p.name: p.from_axis(x[s], None if lo is None else lo[s], None if hi is None else hi[s])
-            for p, s in self._slices()
-        }
 
     def flatten(self, params: Params) -> Float[Array, " P"]:
         """Params dict -> flat vector of parameter values (not transformed)."""
