@@ -182,27 +182,12 @@ def load_measured(path: str | Path):
 
 
 def eval_mitsuba(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
-    """f_r(light, view), (N, 3), with one batched ``measured`` evaluation for all pairs."""
-    from .._mitsuba import mitsuba
+    """f_r(light, view), (N, 3): Mitsuba's ``measured`` plugin evaluated for all pairs at once by
+    :func:`brdffit.render.bsdf.eval_bsdf`, the one way brdffit evaluates a Mitsuba BSDF outside a
+    render (the validation's reference table is evaluated the same way)."""
+    from ..render.bsdf import eval_bsdf
 
-    mi = mitsuba()
-    import drjit as dr
-
-    bsdf = load_measured(path)
-    # Every field defined, at the batch's width (Mitsuba's documented way to evaluate a BSDF from
-    # Python); a default-constructed interaction leaves its other fields as empty arrays. The
-    # float32 directions stay referenced until the result is evaluated (Dr.Jit is lazy).
-    si = dr.zeros(mi.SurfaceInteraction3f, light.shape[0])
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
-    view32 = np.ascontiguousarray(view.T, dtype=np.float32)
-    light32 = np.ascontiguousarray(light.T, dtype=np.float32)
-    si.wi = mi.Vector3f(view32)
-    value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(light32))
-    f_cos = np.array(value, dtype=np.float64).reshape(3, light.shape[0]).T  # Color3f -> (3, N)
-    cos_light = light[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(cos_light[:, None] > 0, f_cos / cos_light[:, None], 0.0)
-    return f
+    return eval_bsdf(load_measured(path), light, view)
 
 
 def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
