@@ -13,6 +13,8 @@ in Jupyter (it has ``_repr_png_``) and is written with ``fig.savefig(path)``.
 - :func:`usage`: where a scene looks at a material (SPEC 12); :func:`scene_panel`: a scene rendered with the
   reference | with the fit | FLIP map.
 - :func:`pareto`: error against run time of a :class:`~brdffit.fitting.compare.Report`.
+- :func:`parameter_maps`: the maps ``fit_btf`` made; :func:`btf_panel`: BTF photographs against
+  renders of the maps.
 
 Conventions shared by the figures
 ---------------------------------
@@ -54,6 +56,8 @@ __all__ = [
     "table",
     "fit_figure",
     "light_label",
+    "parameter_maps",
+    "btf_panel",
 ]
 
 
@@ -669,6 +673,63 @@ def usage(usage, measurement=None, *, bandwidth_deg: float = 5.0, floor: float =
     _usage_density(fig, axes[2], ti, to, usage.weight, ("θ light [°]", "θ view [°]"), "… over (θ light, θ view)")
     fig.suptitle(f"where {usage.material!r} is seen in {usage.scene}: {len(usage)} pairs, "
                  f"{usage.pixels[0]}x{usage.pixels[1]} px, {usage.spp} spp", fontsize=11)
+    return fig
+
+
+# -- BTF -----------------------------------------------------------------------------------------------
+def parameter_maps(maps) -> Figure:
+    """The maps of a ``ParameterMaps`` (``fit_btf``): RGB parameters as sRGB previews scaled by
+    their 99th percentile, scalar ones on viridis between their 1st and 99th percentiles (the
+    scaling of the preview PNGs ``ParameterMaps.save`` writes)."""
+    from .btf.maps import _p99, _range, _rgb_preview
+
+    arrays = maps.maps()
+    cols = min(len(arrays), 4)
+    rows = -(-len(arrays) // cols)
+    fig = _figure((3.2 * cols, 3.0 * rows), dpi=90)
+    for i, (name, a) in enumerate(arrays.items()):
+        ax = fig.add_subplot(rows, cols, i + 1)
+        if a.shape[-1] == 3:
+            ax.imshow(_rgb_preview(a), interpolation="nearest")
+            ax.set_title(f"{name} (RGB, /{_p99(a):.3g})", fontsize=9)
+        else:
+            lo, hi = _range(a[..., 0])
+            im = ax.imshow(a[..., 0], cmap="viridis", vmin=lo, vmax=hi, interpolation="nearest")
+            fig.colorbar(im, ax=ax, fraction=0.046)
+            ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"{maps.model}: {maps.shape[0]} x {maps.shape[1]} texels, "
+                 f"{int(maps.converged.sum())} converged", fontsize=10)
+    return fig
+
+
+def btf_panel(photos, renders, names, metrics) -> Figure:
+    """One row per (light, view) pair of a BTF validation: the photograph, the render of the
+    parameter maps (one exposure, the photograph's) and |error| relative to the exposure level,
+    with the pair's PSNR and FLIP."""
+    from .render.metrics import exposure, tonemap
+
+    n = len(names)
+    fig = _figure((9.5, 3.0 * n), dpi=90)
+    for k in range(n):
+        scale = exposure(photos[k])
+        err = np.abs(np.asarray(renders[k], np.float64) - photos[k]).mean(axis=-1)
+        ref_level = 1.0 / scale
+        for j, (img, title) in enumerate(((tonemap(photos[k], scale), "BTF photograph"),
+                                          (tonemap(renders[k], scale), "render of the maps"))):
+            ax = fig.add_subplot(n, 3, 3 * k + j + 1)
+            ax.imshow(img, interpolation="nearest")
+            ax.set_title(f"{title}\n{names[k]}", fontsize=8)
+            ax.axis("off")
+        ax = fig.add_subplot(n, 3, 3 * k + 3)
+        im = ax.imshow(err / ref_level, cmap="magma", vmin=0, vmax=max(float(np.percentile(err / ref_level, 99)), 1e-6),
+                       interpolation="nearest")
+        fig.colorbar(im, ax=ax, fraction=0.046)
+        m = metrics[k]
+        ax.set_title(f"|error| / exposure level\npsnr {m['psnr']:.1f} dB, flip {m['flip']:.3f}", fontsize=8)
+        ax.axis("off")
+    fig.tight_layout()
     return fig
 
 

@@ -290,3 +290,24 @@ def test_figures_write_pngs_at_the_documented_compression_and_other_formats_unch
     assert _zlib_level_class(buf.getvalue()) == 3
     fig.savefig(tmp_path / "t.pdf")  # no PNG options passed to another backend
     assert (tmp_path / "t.pdf").read_bytes().startswith(b"%PDF")
+
+
+def test_btf_figures_come_from_brdffit_plot():
+    """The BTF displays are brdffit figures (Jupyter PNG, the figures' PNG settings): the maps,
+    RGB as previews with their scale in the title and scalar maps with a colour bar; the
+    validation panel, one row per pair with its metrics."""
+    import types
+
+    rgb = np.full((4, 5, 3), 0.5)
+    maps = types.SimpleNamespace(maps=lambda: {"kd": rgb, "alpha": np.linspace(0.1, 0.3, 20).reshape(4, 5, 1)},
+                                 model="ggx", shape=(4, 5), converged=np.ones((4, 5), bool))
+    fig = bp.parameter_maps(maps)
+    assert isinstance(fig, bp.Figure) and fig._suptitle.get_text() == "ggx: 4 x 5 texels, 20 converged"
+    assert [ax.get_title() for ax in fig.axes if ax.get_images()] == ["kd (RGB, /0.5)", "alpha"]
+    assert len(fig.axes) == 3  # alpha's colour bar
+    photos = np.full((2, 6, 6, 3), 0.2)
+    fig = bp.btf_panel(photos, photos * 1.1, ["pair a", "pair b"], [{"psnr": 30.04, "flip": 0.0123}] * 2)
+    assert isinstance(fig, bp.Figure) and fig._repr_png_().startswith(b"\x89PNG")
+    titles = [ax.get_title() for ax in fig.axes if ax.get_images()]
+    assert titles[:3] == ["BTF photograph\npair a", "render of the maps\npair a",
+                          "|error| / exposure level\npsnr 30.0 dB, flip 0.012"] and len(titles) == 6

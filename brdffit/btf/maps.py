@@ -14,7 +14,6 @@ model, loss, solver, texels, converged count, per-parameter and loss statistics,
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 from pathlib import Path
 
@@ -151,30 +150,9 @@ class ParameterMaps:
 
     # display ------------------------------------------------------------------------------------
     def _repr_png_(self) -> bytes:
-        from matplotlib.figure import Figure
+        from ..plot import parameter_maps, png_bytes
 
-        maps = self.maps()
-        n = len(maps)
-        cols = min(n, 4)
-        rows = -(-n // cols)
-        fig = Figure(figsize=(3.2 * cols, 3.0 * rows), dpi=90)
-        for i, (name, a) in enumerate(maps.items()):
-            ax = fig.add_subplot(rows, cols, i + 1)
-            if a.shape[-1] == 3:
-                ax.imshow(_rgb_preview(a), interpolation="nearest")
-                ax.set_title(f"{name} (RGB, /{_p99(a):.3g})", fontsize=9)
-            else:
-                lo, hi = _range(a[..., 0])
-                im = ax.imshow(a[..., 0], cmap="viridis", vmin=lo, vmax=hi, interpolation="nearest")
-                fig.colorbar(im, ax=ax, fraction=0.046)
-                ax.set_title(name, fontsize=9)
-            ax.set_xticks([])
-            ax.set_yticks([])
-        fig.suptitle(f"{self.model}: {self.shape[0]} x {self.shape[1]} texels, "
-                     f"{int(self.converged.sum())} converged", fontsize=10)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        return buf.getvalue()
+        return png_bytes(parameter_maps(self))
 
     def _repr_html_(self) -> str:
         import base64

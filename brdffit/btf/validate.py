@@ -148,45 +148,16 @@ class BTFValidation:
                 f"(worst {o['psnr_min']:.2f}), flip {o['flip']:.4f})")
 
     def _repr_png_(self) -> bytes:
-        import io
+        from ..plot import btf_panel, png_bytes
 
-        fig = _panel_figure(self.photos, self.renders, [direction_name(*p) for p in self.pairs], self.metrics["pairs"])
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        return buf.getvalue()
-
-
-def _panel_figure(photos, renders, names, metrics):
-    from matplotlib.figure import Figure
-
-    from ..render.metrics import exposure, tonemap
-
-    n = len(names)
-    fig = Figure(figsize=(9.5, 3.0 * n), dpi=90)
-    for k in range(n):
-        scale = exposure(photos[k])
-        err = np.abs(np.asarray(renders[k], np.float64) - photos[k]).mean(axis=-1)
-        ref_level = 1.0 / scale
-        for j, (img, title) in enumerate(((tonemap(photos[k], scale), "BTF photograph"),
-                                          (tonemap(renders[k], scale), "render of the maps"))):
-            ax = fig.add_subplot(n, 3, 3 * k + j + 1)
-            ax.imshow(img, interpolation="nearest")
-            ax.set_title(f"{title}\n{names[k]}", fontsize=8)
-            ax.axis("off")
-        ax = fig.add_subplot(n, 3, 3 * k + 3)
-        im = ax.imshow(err / ref_level, cmap="magma", vmin=0, vmax=max(float(np.percentile(err / ref_level, 99)), 1e-6),
-                       interpolation="nearest")
-        fig.colorbar(im, ax=ax, fraction=0.046)
-        m = metrics[k]
-        ax.set_title(f"|error| / exposure level\npsnr {m['psnr']:.1f} dB, flip {m['flip']:.3f}", fontsize=8)
-        ax.axis("off")
-    fig.tight_layout()
-    return fig
+        return png_bytes(btf_panel(self.photos, self.renders, [direction_name(*p) for p in self.pairs],
+                                   self.metrics["pairs"]))
 
 
 def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bool = False) -> BTFValidation:
     """Render ``maps`` (ParameterMaps or a params.exr path) for each (light, view) pair and compare
     with ``btf``'s photographs; see the module docstring."""
+    from ..plot import btf_panel
     from ..render.metrics import image_metrics
 
     t0 = time.perf_counter()
@@ -230,7 +201,7 @@ def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bo
                 for kind, img in (("photo", photos[k]), ("render", renders[k])):
                     OpenEXR.File(head, {"RGB": np.ascontiguousarray(img, np.float32)}).write(str(tmp / f"{kind}_{name}.exr"))
                     files.append(out / f"{kind}_{name}.exr")
-                fig = _panel_figure(photos[k : k + 1], renders[k : k + 1], [name], per[k : k + 1])
+                fig = btf_panel(photos[k : k + 1], renders[k : k + 1], [name], per[k : k + 1])
                 fig.savefig(tmp / f"panel_{name}.png")
                 files.append(out / f"panel_{name}.png")
             seconds["total"] = time.perf_counter() - t0
