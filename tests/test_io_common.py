@@ -35,6 +35,11 @@ def test_query_directions_given_pairs():
         ([[0, 0, 1]], [[0, 0, 1], [0, 0, 1]], "wi (1, 3) and wo (2, 3) must both be (N, 3)"),
         ([[0, 1]], [[0, 1]], "wi (1, 2) and wo (1, 2) must both be (N, 3)"),
         (np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), "wi (1, 1, 3) and wo (1, 1, 3) must both be (N, 3)"),
+        # not unit vectors: read as given they would sample another angle (or none) silently
+        ([[0, 0, 1], [0, 0, 2]], [[0, 0, 1]] * 2, "wi[1] = [0.0, 0.0, 2.0] has length 2: directions must be unit vectors"),
+        ([[0, 0, 1]], [[0.6, 0, 0.8001]], "wo[0] = [0.6, 0.0, 0.8001] has length 1.00008: directions must be unit vectors"),
+        ([[0, 0, 1]], [[np.nan, 0, 1]], "wo[0] = [nan, 0.0, 1.0] has length nan: directions must be unit vectors"),
+        ([[0, 0, 0]], [[0, 0, 1]], "wi[0] = [0.0, 0.0, 0.0] has length 0: directions must be unit vectors"),
     ],
 )
 def test_query_directions_refusals(wi, wo, message):

@@ -28,6 +28,14 @@ def query_directions(wi=None, wo=None) -> tuple[np.ndarray, np.ndarray, str | No
     wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
     if wi.shape != wo.shape or wi.ndim != 2 or wi.shape[1] != 3:
         raise UsageError(f"wi {wi.shape} and wo {wo.shape} must both be (N, 3)")
+    # A reader evaluates the table at these directions as given: a vector that is not unit would
+    # be read at some other angle, or fall outside the table, without a word.
+    for name, d in (("wi", wi), ("wo", wo)):
+        length = np.linalg.norm(d, axis=1)
+        bad = ~(np.abs(length - 1.0) <= 1e-6)  # NaN and inf count as bad
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise UsageError(f"{name}[{k}] = {d[k].tolist()} has length {length[k]:.6g}: directions must be unit vectors")
     return wi, wo, None
 
 
