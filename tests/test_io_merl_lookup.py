@@ -104,6 +104,7 @@ def test_negative_cells_and_lower_hemisphere_get_weight_zero(tmp_path):
     assert np.all(v[w == 0] == 0.0)
     below = merl.read(path, wi=[[0.6, 0, 0.8], [0.6, 0, -0.8], [0, 0, 1.0]], wo=[[0.0, 0.6, -0.8], [0, 0, 1.0], [0, 0, 1.0]])
     assert np.asarray(below.weights).tolist() == [0.0, 0.0, 1.0]
+    assert dict(below.extra)["invalid_negative"] == 0  # below the horizon is not "unmeasured"
 
 
 def header(dims=(90, 90, 180)):

@@ -88,7 +88,9 @@ def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     light, view, grid = query_directions(wi, wo)
     ih, idd, ip = indices(*half_diff(light, view))
     raw = table[:, ih, idd, ip].T  # (N, 3)
-    ok = np.all(raw >= 0, axis=1) & np.all(np.isfinite(raw), axis=1) & (light[:, 2] > 0) & (view[:, 2] > 0)
+    above = (light[:, 2] > 0) & (view[:, 2] > 0)
+    negative = above & np.any(raw < 0, axis=1)  # cells MERL did not measure
+    ok = above & ~negative & np.all(np.isfinite(raw), axis=1)
     if not ok.any():
         raise InputError(path, "no valid sample at the requested directions (all negative = unmeasured, or NaN)")
     values = np.where(ok[:, None], raw * SCALES, 0.0)
@@ -104,6 +106,6 @@ def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
             "format": "merl",
             "lookup": "nearest cell, sqrt(theta_h) indexing (MERL reference code)",
             "channel_scales": tuple(float(s) for s in SCALES),
-            "invalid_negative": int(np.sum(~ok)),
+            "invalid_negative": int(np.sum(negative)),  # below the horizon: weight 0, not counted here
         },
     )
