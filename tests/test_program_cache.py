@@ -85,3 +85,25 @@ def test_a_second_brdffit_fit_lowers_nothing_for_the_fit_or_its_figure(tmp_path)
     assert first["code"] == second["code"] == 0 and (tmp_path / "out" / "fit.png").stat().st_size > 0
     assert first["lowered"], "the first process compiles (the cache folder was empty)"
     assert second["lowered"] == [] and second["unneeded"] == [], second
+
+
+def test_the_machine_key_names_the_cpu_flags_without_asking_platform(monkeypatch):
+    """The disk cache's machine key holds /proc/cpuinfo's flags line (a program compiled for
+    AVX-512 is not handed to a CPU without it); where that file exists, platform.processor()
+    (which runs ``uname -p`` in a subprocess on Linux) is not consulted."""
+    import platform
+
+    from brdffit.fitting import cache
+
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            flags = next(line for line in fh if line.startswith(("flags", "Features")))
+    except (OSError, StopIteration):
+        import pytest
+
+        pytest.skip("no /proc/cpuinfo flags line on this machine")
+    asked = []
+    monkeypatch.setattr(platform, "processor", lambda: asked.append(1) or "asked")
+    monkeypatch.delitem(cache._STATE, "machine", raising=False)
+    key = cache._machine()
+    assert flags.strip() in key and asked == []
