@@ -38,6 +38,10 @@ def test_immutable_and_replace_keeps_the_rest():
     r = m.replace(name="other")
     assert r.name == "other" and r.extra == m.extra and np.array_equal(r.values, m.values)
     assert dataclasses.replace(m, units="1/sr").name == "two"
+    import copy
+    import pickle
+
+    assert pickle.loads(pickle.dumps(m)) == m and copy.deepcopy(m) == m  # e.g. to worker processes
 
 
 def test_equality_compares_metadata_and_array_values():
