@@ -107,3 +107,23 @@ def test_the_machine_key_names_the_cpu_flags_without_asking_platform(monkeypatch
     monkeypatch.delitem(cache._STATE, "machine", raising=False)
     key = cache._machine()
     assert flags.strip() in key and asked == []
+
+
+def test_a_program_is_kept_per_xla_flags(tmp_path, monkeypatch):
+    """XLA_FLAGS change the code XLA generates (fast math, instruction sets): a program compiled
+    under other flags is not loaded; each setting gets its own file."""
+    import numpy as np
+
+    from brdffit.fitting import cache
+
+    monkeypatch.setitem(cache._STATE, "dir", tmp_path)
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    example = (np.arange(3.0),)
+    for flags in (None, "--xla_cpu_enable_fast_math=false", None):
+        if flags is not None:
+            monkeypatch.setenv("XLA_FLAGS", flags)
+        else:
+            monkeypatch.delenv("XLA_FLAGS", raising=False)
+        program = cache.load_or_compile(("xla_flags_test",), lambda: (lambda x: 2.0 * x + 1.0), example)
+        np.testing.assert_allclose(program(*example), [1.0, 3.0, 5.0])
+    assert len(list((tmp_path / "brdffit-programs").glob("*.bin"))) == 2

@@ -147,7 +147,8 @@ def load_or_compile(key, build, example):
     text = _key_text(key, example) if path is not None and jax.process_count() == 1 else None
     if text is None:
         return jax.jit(build()).lower(*example).compile()
-    text = f"{text}|{_machine()}"
+    # XLA_FLAGS changes what XLA compiles (JAX's own cache key holds them as well).
+    text = f"{text}|{_machine()}|XLA_FLAGS={os.environ.get('XLA_FLAGS', '').strip()}"
     file = path / "brdffit-programs" / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".bin")
     # The program takes the flat list of arrays (our own pytree types, such as problem.Data, are not
     # kept on disk); the returned callable takes the original arguments.
