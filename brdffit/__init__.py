@@ -9,7 +9,7 @@ from __future__ import annotations
 import gc as _gc
 import importlib
 
-# Importing JAX and equinox creates ~10^6 long-lived objects and hardly any garbage: the cyclic
+# Importing JAX creates ~10^6 long-lived objects and hardly any garbage: the cyclic
 # collector would walk them again and again while they load (~0.08 s CPU of every `brdffit`
 # command, which imports this package before it can tune the collector). Paused for these
 # imports only; the caller's setting is restored.

@@ -90,7 +90,7 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     """Arrays for the compiled residual; excluded samples get weight 0 and safe stand-ins."""
     if not isinstance(m, Measurement):
         raise UsageError(f"expected a brdffit.Measurement, got {type(m).__name__}")
-    # Each field read once (a Measurement's fields are JAX arrays behind equinox attribute access).
+    # Each field read once (a Measurement's fields are JAX arrays: each NumPy view is a call into JAX).
     values = np.asarray(m.values, dtype=np.float64)
     wi, wo = np.asarray(m.wi, dtype=np.float64), np.asarray(m.wo, dtype=np.float64)
     w = np.asarray(m.weights, dtype=np.float64)
