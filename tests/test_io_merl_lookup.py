@@ -105,6 +105,12 @@ def test_negative_cells_and_lower_hemisphere_get_weight_zero(tmp_path):
     below = merl.read(path, wi=[[0.6, 0, 0.8], [0.6, 0, -0.8], [0, 0, 1.0]], wo=[[0.0, 0.6, -0.8], [0, 0, 1.0], [0, 0, 1.0]])
     assert np.asarray(below.weights).tolist() == [0.0, 0.0, 1.0]
     assert dict(below.extra)["invalid_negative"] == 0  # below the horizon is not "unmeasured"
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # opposite grazing directions have no half vector: no 0/0 warning
+        grazing = merl.read(path, wi=[[1.0, 0, 0], [0, 0, 1.0]], wo=[[-1.0, 0, 0], [0, 0, 1.0]])
+    assert np.asarray(grazing.weights).tolist() == [0.0, 1.0]
 
 
 def header(dims=(90, 90, 180)):

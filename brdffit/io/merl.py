@@ -63,7 +63,10 @@ def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def half_diff(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
     """(theta_h, theta_d, phi_d) of light/view pairs, as in MERL's reference code."""
     h = wi + wo
-    h = h / np.linalg.norm(h, axis=1, keepdims=True)
+    # Opposite directions (possible only at or below the horizon, where the sample gets weight 0
+    # anyway) have no half vector: the normal stands in, rather than 0/0 and NumPy's warnings.
+    length = np.linalg.norm(h, axis=1, keepdims=True)
+    h = np.where(length > 0, h / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
     theta_h = np.arccos(np.clip(h[:, 2], -1, 1))
     phi_h = np.arctan2(h[:, 1], h[:, 0])
     d = _rotate(wi, np.array([0.0, 0.0, 1.0]), -phi_h)
