@@ -184,6 +184,17 @@ def test_model_repr_names_parameters_with_their_sizes_and_the_first_citation_lin
         "SIGGRAPH 1994)"
     )
     assert repr(get("ggx").with_channels(1)).startswith("Model('ggx': kd, ks, alpha, f0; Walter, Marschner")
+    import dataclasses
+
+    assert repr(dataclasses.replace(get("lambert"), citation="")) == "Model('lambert': kd(3); )"  # a user's model
+
+
+def test_compose_of_nothing_says_so():
+    from brdffit.models.compose import compose
+
+    with pytest.raises(ValueError) as info:
+        compose([])
+    assert str(info.value) == "compose needs at least one model"
 
 
 @pytest.mark.parametrize(("lower", "upper", "text"), [
