@@ -144,11 +144,8 @@ class Measurement:
 
     def replace(self, **changes) -> "Measurement":
         """A copy with some fields changed."""
-        fields = dict(
-            wi=self.wi, wo=self.wo, values=self.values, weights=self.weights, name=self.name,
-            source=self.source, grid=self.grid, colour_space=self.colour_space, units=self.units,
-            extra=dict(self.extra),
-        )
+        fields = {k: getattr(self, k) for k in _ARRAYS + _METADATA}
+        fields["extra"] = dict(self.extra)
         fields.update(changes)
         return Measurement(**fields)
 
@@ -159,8 +156,13 @@ class Measurement:
         )
 
 
+def _flatten(m: Measurement):
+    return tuple(getattr(m, k) for k in _ARRAYS), tuple(getattr(m, k) for k in _METADATA)
+
+
 def _flatten_with_keys(m: Measurement):
-    return tuple((jax.tree_util.GetAttrKey(k), getattr(m, k)) for k in _ARRAYS), tuple(getattr(m, k) for k in _METADATA)
+    arrays, metadata = _flatten(m)
+    return tuple(zip((jax.tree_util.GetAttrKey(k) for k in _ARRAYS), arrays)), metadata
 
 
 def _unflatten(metadata, arrays) -> Measurement:
@@ -172,6 +174,4 @@ def _unflatten(metadata, arrays) -> Measurement:
     return m
 
 
-jax.tree_util.register_pytree_with_keys(
-    Measurement, _flatten_with_keys, _unflatten, lambda m: (tuple(getattr(m, k) for k in _ARRAYS),
-                                                           tuple(getattr(m, k) for k in _METADATA)))
+jax.tree_util.register_pytree_with_keys(Measurement, _flatten_with_keys, _unflatten, _flatten)
