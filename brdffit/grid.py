@@ -54,6 +54,28 @@ def cartesian_to_spherical(v) -> tuple[np.ndarray, np.ndarray]:
     return theta, phi
 
 
+def half_diff(wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rusinkiewicz (1998) coordinates (theta_h, theta_d, phi_d) of light/view pairs, radians:
+    the half vector h = (wi + wo) / |wi + wo| in the local frame, and wi in the frame of h (wi
+    turned by -phi_h about z, then by -theta_h about y), phi_d in (-pi, pi]. As MERL's reference
+    code (``std_coords_to_half_diff_coords``); opposite directions (only at or below the horizon)
+    have no half vector: the normal stands in, rather than 0/0 and NumPy's warnings."""
+    wi = np.asarray(wi, np.float64).reshape(-1, 3)
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    h = wi + wo
+    length = np.linalg.norm(h, axis=1, keepdims=True)
+    h = np.where(length > 0, h / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
+    theta_h = np.arccos(np.clip(h[:, 2], -1.0, 1.0))
+    phi_h = np.arctan2(h[:, 1], h[:, 0])
+    c, s = np.cos(phi_h), np.sin(phi_h)
+    x = c * wi[:, 0] + s * wi[:, 1]
+    y = -s * wi[:, 0] + c * wi[:, 1]
+    ct, st = np.cos(theta_h), np.sin(theta_h)
+    dx = ct * x - st * wi[:, 2]
+    dz = st * x + ct * wi[:, 2]
+    return theta_h, np.arccos(np.clip(dz, -1.0, 1.0)), np.arctan2(y, dx)
+
+
 def ubo_directions() -> Float[np.ndarray, "81 3"]:
     """The 81 UBO directions as unit vectors in the local frame."""
     a = ubo_angles()

@@ -57,6 +57,7 @@ __all__ = [
     "fit_figure",
     "light_label",
     "parameter_maps",
+    "map_preview_png",
     "btf_panel",
 ]
 
@@ -677,12 +678,38 @@ def usage(usage, measurement=None, *, bandwidth_deg: float = 5.0, floor: float =
 
 
 # -- BTF -----------------------------------------------------------------------------------------------
+def _p99(a) -> float:
+    v = float(np.percentile(np.asarray(a, np.float64), 99))
+    return v if v > 0 else 1.0
+
+
+def _range(a) -> tuple[float, float]:
+    lo, hi = (float(x) for x in np.percentile(np.asarray(a, np.float64), [1, 99]))
+    return (lo, hi if hi > lo else lo + 1e-12)
+
+
+def _rgb_preview(a) -> np.ndarray:
+    from .io.images import linear_to_srgb
+
+    return linear_to_srgb(np.asarray(a, np.float64) / _p99(a))
+
+
+def map_preview_png(a: np.ndarray, path) -> None:
+    """One parameter map (H, W, 1 or 3) as a PNG of its own pixels, scaled as in
+    :func:`parameter_maps` (``ParameterMaps.save`` writes these previews)."""
+    import matplotlib.image
+
+    if a.shape[-1] == 3:
+        matplotlib.image.imsave(path, _rgb_preview(a), format="png")
+    else:
+        lo, hi = _range(a[..., 0])
+        matplotlib.image.imsave(path, a[..., 0], cmap="viridis", vmin=lo, vmax=hi, format="png")
+
+
 def parameter_maps(maps) -> Figure:
     """The maps of a ``ParameterMaps`` (``fit_btf``): RGB parameters as sRGB previews scaled by
     their 99th percentile, scalar ones on viridis between their 1st and 99th percentiles (the
-    scaling of the preview PNGs ``ParameterMaps.save`` writes)."""
-    from .btf.maps import _p99, _range, _rgb_preview
-
+    scaling of the preview PNGs ``ParameterMaps.save`` writes: :func:`map_preview_png`)."""
     arrays = maps.maps()
     cols = min(len(arrays), 4)
     rows = -(-len(arrays) // cols)

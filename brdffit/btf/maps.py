@@ -131,13 +131,15 @@ class ParameterMaps:
     def save(self, folder, force: bool = False) -> list[Path]:
         """preview_<name>.png, maps.png, summary.json and params.exr in ``folder``, each atomic;
         params.exr last, so that its presence means a complete result."""
+        from ..plot import map_preview_png
+
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         files = []
         for name, a in self.maps().items():
             target = folder / f"preview_{name}.png"
             with atomic_file(target, force=force, suffix=".png") as tmp:
-                _preview(a, tmp)
+                map_preview_png(a, tmp)
             files.append(target)
         with atomic_file(folder / "maps.png", force=force, suffix=".png") as tmp:
             tmp.write_bytes(self._repr_png_())
@@ -176,29 +178,3 @@ def _plain(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
-
-
-def _p99(a) -> float:
-    v = float(np.percentile(np.asarray(a, np.float64), 99))
-    return v if v > 0 else 1.0
-
-
-def _range(a) -> tuple[float, float]:
-    lo, hi = (float(x) for x in np.percentile(np.asarray(a, np.float64), [1, 99]))
-    return (lo, hi if hi > lo else lo + 1e-12)
-
-
-def _rgb_preview(a) -> np.ndarray:
-    from ..io.images import linear_to_srgb
-
-    return linear_to_srgb(np.asarray(a, np.float64) / _p99(a))
-
-
-def _preview(a: np.ndarray, path: Path) -> None:
-    import matplotlib.image
-
-    if a.shape[-1] == 3:
-        matplotlib.image.imsave(path, _rgb_preview(a), format="png")
-    else:
-        lo, hi = _range(a[..., 0])
-        matplotlib.image.imsave(path, a[..., 0], cmap="viridis", vmin=lo, vmax=hi, format="png")

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..grid import half_diff
 from ..measurement import Measurement
 from ._common import query_directions
 
@@ -51,29 +52,6 @@ def read_table(path: Path) -> np.ndarray:
             raise InputError(path, f"{what}: {size} bytes, a MERL .binary has {expected}")
         data = np.frombuffer(fh.read(8 * n), dtype="<f8")
     return data.reshape(3, *RES)
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues rotation of vectors v (N,3) about a fixed unit axis by angles (N,)."""
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    axis = np.broadcast_to(axis, v.shape)
-    return v * c + axis * np.sum(axis * v, axis=1, keepdims=True) * (1 - c) + np.cross(axis, v) * s
-
-
-def half_diff(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(theta_h, theta_d, phi_d) of light/view pairs, as in MERL's reference code."""
-    h = wi + wo
-    # Opposite directions (possible only at or below the horizon, where the sample gets weight 0
-    # anyway) have no half vector: the normal stands in, rather than 0/0 and NumPy's warnings.
-    length = np.linalg.norm(h, axis=1, keepdims=True)
-    h = np.where(length > 0, h / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
-    theta_h = np.arccos(np.clip(h[:, 2], -1, 1))
-    phi_h = np.arctan2(h[:, 1], h[:, 0])
-    d = _rotate(wi, np.array([0.0, 0.0, 1.0]), -phi_h)
-    d = _rotate(d, np.array([0.0, 1.0, 0.0]), -theta_h)
-    theta_d = np.arccos(np.clip(d[:, 2], -1, 1))
-    phi_d = np.arctan2(d[:, 1], d[:, 0])
-    return theta_h, theta_d, phi_d
 
 
 def indices(theta_h, theta_d, phi_d) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -45,6 +45,7 @@ import numpy as np
 
 from .._mitsuba import mitsuba
 from ..errors import UsageError
+from ..grid import half_diff
 from ._drjit import python_bsdf_render
 from .load import load_scene, replaced, scene_name
 
@@ -74,22 +75,8 @@ def rusinkiewicz(wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> 
     and wo), and phi_d and -phi_d too (mirror symmetry about the plane of incidence), so
     phi_d -> |phi_d| mod pi -> min(phi_d, pi - phi_d) loses nothing.
     """
-    wi = np.asarray(wi, np.float64).reshape(-1, 3)
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    h = wi + wo
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
-    theta_h = np.arccos(np.clip(h[:, 2], -1.0, 1.0))
-    phi_h = np.arctan2(h[:, 1], h[:, 0])
-    # rotate wi by -phi_h about z, then by -theta_h about y: wi in the half-vector frame
-    c, s = np.cos(phi_h), np.sin(phi_h)
-    x = c * wi[:, 0] + s * wi[:, 1]
-    y = -s * wi[:, 0] + c * wi[:, 1]
-    z = wi[:, 2]
-    ct, st = np.cos(theta_h), np.sin(theta_h)
-    dx = ct * x - st * z
-    dz = st * x + ct * z
-    theta_d = np.arccos(np.clip(dz, -1.0, 1.0))
-    phi_d = np.mod(np.arctan2(y, dx), np.pi)
+    theta_h, theta_d, phi_d = half_diff(wi, wo)
+    phi_d = np.mod(phi_d, np.pi)
     phi_d = np.minimum(phi_d, np.pi - phi_d)
     return np.stack([theta_h, theta_d, phi_d], -1)
 
