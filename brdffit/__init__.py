@@ -1,39 +1,24 @@
 """brdffit: fit analytic BRDF models (JAX + optimistix) to measured reflectance, validate in Mitsuba 3.
 
-The flow is ``load -> Measurement -> fit -> FitResult -> validate``. Fitting runs in float64:
-importing brdffit enables ``jax_enable_x64`` (float32 inputs stay float32).
+The flow is ``load -> Measurement -> fit -> FitResult -> validate``. Fitting runs in float64: the
+parts of brdffit that compute with JAX enable ``jax_enable_x64`` when they are first imported
+(float32 inputs stay float32; ``brdffit/_x64.py``).
 """
 
 from __future__ import annotations
 
-import gc as _gc
 import importlib
 
-# Importing JAX creates ~10^6 long-lived objects and hardly any garbage: the cyclic
-# collector would walk them again and again while they load (~0.08 s CPU of every `brdffit`
-# command, which imports this package before it can tune the collector). Paused for these
-# imports only; the caller's setting is restored.
-_collecting = _gc.isenabled()
-_gc.disable()
-try:
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
-
-    from . import models
-    from .errors import InputError, UsageError
-    from .grid import ubo_angles, ubo_directions, ubo_pairs
-    from .measurement import Measurement
-finally:
-    if _collecting:
-        _gc.enable()
-    del _collecting
+from .errors import InputError, UsageError
+from .grid import ubo_angles, ubo_directions, ubo_pairs
 
 __version__ = "0.1.0"
 
-# Heavier parts load on first use, so that `import brdffit` and the CLI start fast and Mitsuba is
-# imported only where rendering happens.
+# Everything that needs JAX, matplotlib or Mitsuba loads on first use: `import brdffit` and the
+# CLI start without them (``brdffit fit`` draws its figure in a process that never imports JAX),
+# and Mitsuba is imported only where rendering happens.
 _LAZY = {
+    "Measurement": "brdffit.measurement",
     "load": "brdffit.io",
     "save": "brdffit.io",
     "resample": "brdffit.io",
@@ -65,8 +50,8 @@ _LAZY = {
 
 
 def __getattr__(name: str):
-    if name == "plot":
-        return importlib.import_module("brdffit.plot")
+    if name in ("plot", "models"):  # modules
+        return importlib.import_module(f"brdffit.{name}")
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
@@ -89,7 +74,7 @@ _register_mitsuba_plugin()
 
 
 def __dir__():
-    # the public names only (not the helpers this module imports: annotations, importlib, jax)
+    # the public names only (not the helpers this module imports: annotations, importlib)
     return sorted({*__all__, "__version__", "plot"})
 
 

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 from .grid import UBO_SIZE
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run

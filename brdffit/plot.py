@@ -34,10 +34,10 @@ Conventions shared by the figures
 from __future__ import annotations
 
 import io
-import os
+
+import dataclasses
 
 import numpy as np
-from matplotlib.figure import Figure as _MplFigure
 
 from .grid import UBO_PHI_STEP_DEG, UBO_THETA_DEG, ubo_directions, ubo_pairs
 
@@ -55,6 +55,8 @@ __all__ = [
     "spheres",
     "table",
     "fit_figure",
+    "fit_figure_data",
+    "FigureData",
     "light_label",
     "parameter_maps",
     "map_preview_png",
@@ -67,24 +69,14 @@ __all__ = [
 PNG_COMPRESS_LEVEL = 3
 
 
-class Figure(_MplFigure):
-    """A matplotlib Figure that also shows itself in Jupyter without pyplot (``_repr_png_``) and
-    writes PNGs at :data:`PNG_COMPRESS_LEVEL`."""
+def __getattr__(name: str):
+    # ``Figure`` (matplotlib's, which every figure here is) is imported with matplotlib when first
+    # needed: the data a figure shows is made without matplotlib (``FigureData``).
+    if name == "Figure":
+        from ._mpl_figure import Figure
 
-    def _repr_png_(self) -> bytes:
-        return png_bytes(self)
-
-    def savefig(self, fname, *args, **kwargs):
-        """``matplotlib.figure.Figure.savefig``; a PNG (by ``format=`` or the file's suffix) is
-        compressed at :data:`PNG_COMPRESS_LEVEL` unless ``pil_kwargs`` is given."""
-        import matplotlib
-
-        fmt = kwargs.get("format")
-        if fmt is None and isinstance(fname, (str, os.PathLike)):
-            fmt = os.path.splitext(os.fspath(fname))[1][1:] or None
-        if str(fmt or matplotlib.rcParams["savefig.format"]).lower() == "png":
-            kwargs.setdefault("pil_kwargs", {"compress_level": PNG_COMPRESS_LEVEL})
-        return super().savefig(fname, *args, **kwargs)
+        return Figure
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def png_bytes(fig, dpi: float = 90) -> bytes:
@@ -94,6 +86,8 @@ def png_bytes(fig, dpi: float = 90) -> bytes:
 
 
 def _figure(figsize, **kwargs) -> Figure:
+    from ._mpl_figure import Figure
+
     return Figure(figsize=figsize, **kwargs)
 
 
@@ -279,7 +273,13 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
 
     ``measurement``: a UBO-81 Measurement or an (81, 81, C) table (NaN = excluded); ``fit``: a
     FitResult (evaluated at the measurement's own directions) or an (81, 81, C) table."""
+    return FigureData("compare_table", _compare_table_content(measurement, fit, title)).draw()
+
+
+def _compare_table_content(measurement, fit, title: str | None) -> dict:
+    """What :func:`compare_table` shows, as arrays and text (the fit evaluated, the residual)."""
     ref, valid, cos_l, ref_label = _grid_table(measurement)
+    summary = None
     if _is_fit(fit):
         from .measurement import Measurement
 
@@ -289,16 +289,22 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
         else:
             fitted = _grid_table(fit)[0]
         fit_label = f"{fit.model_name} ({fit.solver}, {fit.loss} loss)"
+        summary = _fit_summary(fit)
     else:
         fitted, _, _, fit_label = _grid_table(fit)
     valid = valid & np.all(np.isfinite(fitted), axis=-1)
-    lo, hi = log_range(ref, valid)
     residual, lrmse = _residual_and_log_rmse(fitted, ref, cos_l[..., None], valid[..., None])
     residual[~valid] = np.nan
     v3 = np.broadcast_to(valid[..., None], ref.shape)
     d = (fitted - ref)[v3]
     rmse = float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
+    return {"ref": ref, "fitted": fitted, "valid": valid, "residual": residual, "rmse": rmse, "log_rmse": lrmse,
+            "ref_label": ref_label, "fit_label": fit_label, "summary": summary, "title": title}
 
+
+def _draw_compare_table(ref, fitted, valid, residual, rmse: float, log_rmse: float, ref_label: str, fit_label: str,
+                        summary: str | None, title: str | None) -> Figure:
+    lo, hi = log_range(ref, valid)
     names = _channel_names(ref.shape[-1])
     cols = max(len(names), 2)
     row = _PANEL + _TITLE
@@ -318,10 +324,10 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
     _log_colourbar(fig, lo, hi, "f_r per channel (1/sr), log scale",
                    cax=_inch_axes(fig, _LEFT + 2 * _PANEL + _GAP + _BAR_PAD, top_y, _BAR_W, _PANEL))
     _excluded_legend(ax_m, int(np.count_nonzero(~valid)), below_view_axis=False)
-    if _is_fit(fit) and cols >= 3:  # the free slot of the top row: what the fit found
+    if summary is not None and cols >= 3:  # the free slot of the top row: what the fit found
         text_x = _LEFT + 2 * _PANEL + _GAP + _BAR_PAD + _BAR_W + _BAR_LABEL
         fig.text(text_x / fig.get_size_inches()[0], (top_y + _PANEL) / fig.get_size_inches()[1],
-                 _fit_summary(fit), fontsize=8, va="top", ha="left", family="monospace")
+                 summary, fontsize=8, va="top", ha="left", family="monospace")
     lim = _sym_limit(residual)
     cmap = _diverging()
     for c, name in enumerate(names):
@@ -333,7 +339,7 @@ def compare_table(measurement, fit, *, title: str | None = None) -> Figure:
                                          _BAR_W, _PANEL))
     cb.set_label("ln(1 + f_fit cos θ_l) − ln(1 + f_meas cos θ_l)\nred: fit too bright, blue: too dark", fontsize=8)
     cb.ax.tick_params(labelsize=7)
-    fig.suptitle(title or f"UBO-81 table: RMSE {rmse:.3g} 1/sr   log-RMSE {lrmse:.3g} (RMS of the residual shown)",
+    fig.suptitle(title or f"UBO-81 table: RMSE {rmse:.3g} 1/sr   log-RMSE {log_rmse:.3g} (RMS of the residual shown)",
                  fontsize=10, y=1.0 - 0.12 / fig.get_size_inches()[1], va="top")
     return fig
 
@@ -369,9 +375,17 @@ def _diverging():
 
 def scatter(measurement, fit, *, title: str | None = None) -> Figure:
     """Fitted against measured f_r per channel (R, G, B), log axes: for scattered samples."""
-    mask = measurement.valid_mask()
-    ref = np.asarray(measurement.values, np.float64)
-    fitted = np.asarray(fit.eval(np.asarray(measurement.wi), np.asarray(measurement.wo)), np.float64)
+    return FigureData("scatter", _scatter_content(measurement, fit, title)).draw()
+
+
+def _scatter_content(measurement, fit, title: str | None) -> dict:
+    return {"ref": np.asarray(measurement.values, np.float64),
+            "fitted": np.asarray(fit.eval(np.asarray(measurement.wi), np.asarray(measurement.wo)), np.float64),
+            "mask": np.asarray(measurement.valid_mask()),
+            "title": title or f"{fit.model_name} on {measurement.name}: {fit.status}"}
+
+
+def _draw_scatter(ref, fitted, mask, title: str) -> Figure:
     names = _channel_names(ref.shape[1])
     pos = ref[mask][ref[mask] > 0]
     lo = max(float(pos.min()) if pos.size else 1e-3, 1e-6)
@@ -387,19 +401,40 @@ def scatter(measurement, fit, *, title: str | None = None) -> Figure:
     ax.set_xlabel("measured f_r (1/sr)")
     ax.set_ylabel("fitted f_r (1/sr)")
     ax.legend(fontsize=8, title=f"{int(np.count_nonzero(~mask))} samples excluded", title_fontsize=7)
-    ax.set_title(title or f"{fit.model_name} on {measurement.name}: {fit.status}", fontsize=9)
+    ax.set_title(title, fontsize=9)
     return fig
 
 
 def fit_figure(measurement, fit) -> Figure:
     """The figure ``brdffit fit`` writes: :func:`compare_table` on UBO-81 data, else :func:`scatter`."""
+    return fit_figure_data(measurement, fit).draw()
+
+
+def fit_figure_data(measurement, fit) -> FigureData:
+    """What :func:`fit_figure` shows, evaluated (the fit on the measurement's directions, the
+    residual), ready to be drawn here or in a process without JAX."""
     if measurement.grid == "ubo81":
-        return compare_table(
-            measurement, fit,
-            title=f"{fit.model_name} ({fit.solver}, {fit.loss} loss) on {measurement.name}: {fit.status}; "
-                  f"log-RMSE {fit.metrics.get('log_rmse', float('nan')):.3g}",
-        )
-    return scatter(measurement, fit)
+        title = (f"{fit.model_name} ({fit.solver}, {fit.loss} loss) on {measurement.name}: {fit.status}; "
+                 f"log-RMSE {fit.metrics.get('log_rmse', float('nan')):.3g}")
+        return FigureData("compare_table", _compare_table_content(measurement, fit, title))
+    return FigureData("scatter", _scatter_content(measurement, fit, None))
+
+
+@dataclasses.dataclass(frozen=True)
+class FigureData:
+    """A figure's content as NumPy arrays and text: made where the measurement and the fit are
+    (:func:`fit_figure_data`), drawn by :meth:`draw` (matplotlib) in this process or in another,
+    which then needs neither JAX nor the fit (``brdffit fit`` draws fit.png in a process of its
+    own while it fits: ``brdffit._figure_process``). Picklable."""
+
+    kind: str  # the figure: "compare_table" or "scatter"
+    content: dict
+
+    def draw(self) -> Figure:
+        return _DRAW[self.kind](**self.content)
+
+
+_DRAW = {"compare_table": _draw_compare_table, "scatter": _draw_scatter}
 
 
 # -- polar slices ------------------------------------------------------------------------------------

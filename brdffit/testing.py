@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 from .grid import spherical_to_cartesian
 from .models import Model, get
 

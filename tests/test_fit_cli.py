@@ -82,34 +82,49 @@ def test_compare_writes_report(ubo_npz, tmp_path):
     assert main(["compare", str(ubo_npz), "--models", "ggx", "--losses", "bad", "-o", str(tmp_path / "c2")]) == 2
 
 
-def test_background_import_returns_the_module_and_raises_its_failure_in_the_caller():
-    from brdffit.cli import BackgroundImport
+# A figure made of NumPy arrays only (no JAX, no fit): what FigureProcess is handed.
+_FIGURE_SCRIPT = (
+    "import sys\n"
+    "import numpy as np\n"
+    "from brdffit._figure_process import FigureProcess\n"
+    "from brdffit.plot import FigureData\n"
+    "ref = np.random.default_rng(0).uniform(0.01, 1.0, (200, 3))\n"
+    "data = FigureData('scatter', {'ref': ref, 'fitted': ref * 1.1, 'mask': np.ones(200, bool), 'title': 't'})\n"
+    "command = None if sys.argv[2] == 'worker' else [sys.argv[2], '-c', 'import sys; sys.exit(1)']\n"
+    "with FigureProcess(command) as figure:\n"
+    "    figure.savefig(data, sys.argv[1], dpi=50)\n"
+    "print('matplotlib' in sys.modules, 'jax' in sys.modules)\n"
+)
 
-    assert BackgroundImport("brdffit.plot").module().fit_figure.__name__ == "fit_figure"
-    broken = BackgroundImport("brdffit._no_such_module")
-    with pytest.raises(ModuleNotFoundError, match="brdffit._no_such_module"):
-        broken.module()
 
-
-def test_background_import_is_not_waited_for_after_an_interrupt():
-    """Ctrl-C can land inside the import system and leave its lock held by the main thread; the
-    background import then waits for ever, so after an interrupt the command must not wait for it
-    (seen: ``brdffit fit`` hung after Ctrl-C). In a child process, since the old behaviour hangs."""
+@pytest.mark.parametrize("worker", ["worker", "failing", "/nonexistent/python"])
+def test_the_figure_worker_draws_the_png_and_a_failed_worker_leaves_it_to_this_process(tmp_path, worker):
+    """``brdffit fit``'s figure: drawn by the worker (this process imports neither matplotlib nor
+    JAX), or, when the worker fails or cannot start, here: the same PNG either way."""
     import subprocess
     import sys
 
-    script = (
-        "import _imp, time\n"
-        "from brdffit.cli import BackgroundImport, Interrupted\n"
-        "from brdffit._files import STOP_REQUESTED\n"
-        "_imp.acquire_lock()  # left held, as an interrupt inside the import system can leave it\n"
-        "pending = BackgroundImport('brdffit._not_imported_yet')\n"
-        "STOP_REQUESTED.set()\n"
-        "try:\n"
-        "    pending.module()\n"
-        "except Interrupted:\n"
-        "    print('interrupted')\n"
-    )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
-    assert done.returncode == 0 and done.stdout.strip() == "interrupted", done.stderr
+    from PIL import Image
+
+    png = tmp_path / "f.png"
+    command = sys.executable if worker == "failing" else worker
+    done = subprocess.run([sys.executable, "-c", _FIGURE_SCRIPT, str(png), command], capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    drew_here = worker != "worker"
+    assert done.stdout.split() == [str(drew_here), "False"]
+    assert Image.open(png).size == (325, 300)  # 6.5 x 6.0 inches at 50 dpi
+
+
+def test_an_unused_figure_worker_is_stopped_at_once():
+    """A command that fails before its figure (bad input) must not wait for the worker's import."""
+    import time
+
+    from brdffit._figure_process import FigureProcess
+
+    figure = FigureProcess()
+    proc = figure._proc
+    assert proc is not None and proc.poll() is None
+    t0 = time.perf_counter()
+    figure.close()
+    assert proc.poll() is not None and time.perf_counter() - t0 < 5.0

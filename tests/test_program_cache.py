@@ -64,7 +64,8 @@ jax.monitoring.register_event_duration_secs_listener(
     if event == "/jax/core/compile/jaxpr_to_mlir_module_duration" else None)
 from brdffit.cli import main
 code = main(["fit", {str(REPO / 'data' / 'sample_ubo81.exr')!r}, "--model", "ggx", "-o", sys.argv[1], "--force"])
-print(json.dumps({{"code": code, "lowered": lowered, "unneeded": sorted({{"equinox", "jaxtyping"}} & set(sys.modules))}}))
+print(json.dumps({{"code": code, "lowered": lowered,
+                  "unneeded": sorted({{"equinox", "jaxtyping", "matplotlib"}} & set(sys.modules))}}))
 """
 
 
@@ -72,8 +73,8 @@ def test_a_second_brdffit_fit_lowers_nothing_for_the_fit_or_its_figure(tmp_path)
     """``brdffit fit`` in a second process: the fit, ``FitResult.eval`` of the fitted table and the
     figure's log residual all come compiled from the disk cache (each program traced and lowered
     costs ~0.1-0.2 s of a command whose target is 2.5 s), and neither equinox (~0.2 s; a fit that
-    is loaded, not compiled, needs no optimistix) nor jaxtyping (~45 ms; annotations only) is
-    imported."""
+    is loaded, not compiled, needs no optimistix), jaxtyping (~45 ms; annotations only) nor
+    matplotlib (~0.7 s; the figure's worker process draws fit.png) is imported."""
     env = dict(os.environ, BRDFFIT_CACHE=str(tmp_path / "cache"))
     runs = []
     for _ in range(2):

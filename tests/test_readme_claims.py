@@ -140,9 +140,10 @@ def test_fit_failing_half_way_leaves_no_folder(tmp_path, monkeypatch, capsys):
     src = tmp_path / "src.npz"
     brdffit.save(_ubo_measurement(), src)
     out = tmp_path / "fitout"
-    import brdffit.plot as plot_module
+    from brdffit._figure_process import FigureProcess
 
-    monkeypatch.setattr(plot_module, "fit_figure", lambda *a, **k: _FailingFigure())
+    # fit.png is written by FigureProcess.savefig (its worker, or this process when that fails)
+    monkeypatch.setattr(FigureProcess, "savefig", lambda self, data, path, dpi: _half_write_then_fail(path))
     code, _, err = _run(capsys, "fit", src, "-m", "lambert", "-o", out)
     assert code == 3, err
     assert not out.exists() and _leftovers(tmp_path, out) == []

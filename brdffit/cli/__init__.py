@@ -92,47 +92,6 @@ def _interrupts_raise():
         STOP_REQUESTED.clear()
 
 
-class BackgroundImport:
-    """Import a module in a thread while the main thread works, for a module a command needs only
-    at its end (matplotlib for the figure: ~0.8 s of a second-process ``brdffit fit``). The import
-    progresses while the main thread waits outside the interpreter (reading the file, loading and
-    running the compiled fit), so its time hides behind that work; an import competing with other
-    imports gains nothing (they share the interpreter lock), hence start it after those.
-    :meth:`module` waits for it and returns the module; a failed import is raised there, in the
-    caller's thread, by importing again."""
-
-    def __init__(self, name: str):
-        self.name = name
-        self._thread = threading.Thread(target=self._run, name=f"brdffit import {name}", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        import importlib
-
-        with contextlib.suppress(BaseException):  # module() imports again and raises it where it is handled
-            importlib.import_module(self.name)
-
-    def wait(self) -> None:
-        """Wait for the import (the process must not end mid-import), unless the user interrupted:
-        then not at all. An interrupt raised inside the import system can leave its lock held by
-        the interrupted main thread, and this thread's import would wait for it for ever (seen:
-        Ctrl-C during the EXR read hung ``brdffit fit``). The thread is a daemon; the process ends."""
-        from .._files import STOP_REQUESTED
-
-        if not STOP_REQUESTED.is_set():
-            self._thread.join()  # a Ctrl-C meanwhile interrupts the join
-
-    def module(self):
-        import importlib
-
-        from .._files import STOP_REQUESTED
-
-        self.wait()
-        if STOP_REQUESTED.is_set():  # interrupted, its exception swallowed: do not touch the import lock
-            raise Interrupted()
-        return importlib.import_module(self.name)
-
-
 def check_model(name: str, channels: int = 3):
     """The model ``name`` (e.g. ``lambert+ggx``), or a usage error (exit 2) for names that cannot
     make a model: unknown, ``lafortune0``, ``lafortune100000``, ``lambert+lambert``..."""

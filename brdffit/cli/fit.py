@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from . import EXIT_NOT_CONVERGED, EXIT_OK, BackgroundImport, check_model, cli
+from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
 
 
 def parse_assignments(option: str, items, expect_pair: bool) -> dict:
@@ -53,6 +53,15 @@ def model_help() -> str:
             "(`brdffit models` lists parameters, bounds and citations).")
 
 
+class ModelOption(click.Option):
+    """``--model``, whose help lists the library's models when help is shown: listing them imports
+    every model, and JAX, which a command that is not asked for help must not wait for here."""
+
+    def get_help_record(self, ctx):
+        self.help = model_help()
+        return super().get_help_record(ctx)
+
+
 # The CLI's defaults are the API's (one set of defaults, a module without heavy imports).
 from .._fit_defaults import DEFAULT_LOSS as _LOSS  # noqa: E402
 from .._fit_defaults import DEFAULT_MAX_STEPS as _MAX_STEPS  # noqa: E402
@@ -63,7 +72,7 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 
 @cli.command("fit")
 @click.argument("source", type=click.Path(path_type=str))
-@click.option("--model", "-m", "model", required=True, help=model_help())
+@click.option("--model", "-m", "model", cls=ModelOption, required=True, help="Model name, or a sum such as lambert+ggx+ggx.")
 @click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
 @click.option("--solver", default=_SOLVER, show_default=True, help=" | ".join(_SOLVERS))
 @click.option("--multistart", default=None, type=click.IntRange(min=0),
@@ -82,14 +91,22 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 def fit_command(source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
                 force, scene, material) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
-    from contextlib import nullcontext
+    from .._figure_process import FigureProcess
+
+    # fit.png is drawn by a worker that imports matplotlib beside this process's imports and fit
+    # (on another core): started before anything here imports JAX.
+    with FigureProcess() as figure:
+        return _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
+                    force, scene, material)
+
+
+def _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
+         force, scene, material) -> int:
+    import contextlib
 
     from rich.console import Console
 
-    import contextlib
-
     from .. import load
-
     from .._files import atomic_dir, reserve
     from ..fitting import fit
     from ..fitting.losses import check_loss
@@ -113,10 +130,7 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
     with contextlib.ExitStack() as stack:
         if out is not None:  # checked, writable and locked before any work
             stack.enter_context(reserve(out, force, folder=True))
-        status = stack.enter_context(console.status(f"reading {source}") if live else nullcontext())
-        # the figure's matplotlib is imported while the file is read and the fit runs
-        plot_import = BackgroundImport("brdffit.plot")
-        stack.callback(plot_import.wait)
+        status = stack.enter_context(console.status(f"reading {source}") if live else contextlib.nullcontext())
         usage = None
         if scene is not None or material is not None:  # SPEC 12: scene-aware fit
             from ..scene.usage import cli_usage
@@ -137,9 +151,12 @@ def fit_command(source, model, loss, solver, multistart, max_steps, bound_items,
         r = fit(m, model, loss=loss, solver=solver, multistart=multistart, max_steps=max_steps, progress=progress,
                 bounds=bounds, fixed=fixed, physical=physical, scene=usage)
         progress("writing fit.json, fit.png")
+        from ..plot import fit_figure_data
+
+        data = fit_figure_data(m, r)
         with atomic_dir(out, force) as tmp:
             r.to_json(tmp / "fit.json")
-            plot_import.module().fit_figure(m, r).savefig(tmp / "fit.png", dpi=110)
+            figure.savefig(data, tmp / "fit.png", dpi=110)
     console.print(repr(r), soft_wrap=True)
     for line in r.warnings:  # one line each, on stderr with the rest of the report
         console.print(f"warning: {line}", soft_wrap=True, markup=False, highlight=False)
