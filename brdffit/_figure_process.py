@@ -7,9 +7,9 @@ imports JAX (``import brdffit`` and the CLI do not) imports matplotlib on anothe
 receives the figure's data (``brdffit.plot.FigureData``: arrays and text, no JAX) when the fit is
 done, and writes the PNG; this process then only waits for it.
 
-The worker is a plain ``python -m brdffit._figure_process`` child: it starts the same way on every
-platform, and it needs nothing from this process but the pickled data and the target path on its
-standard input. Its own session (a Ctrl-C at the terminal reaches this process only, which stops
+The worker is a plain Python child running :func:`main`: it starts the same way on every platform,
+and it needs nothing from this process but the pickled data and the target path on its standard
+input. Its own session (a Ctrl-C at the terminal reaches this process only, which stops
 it); it reads its standard input, so it also ends when this process is gone. Whatever goes wrong
 in it (it cannot start, it fails, it is killed), :meth:`FigureProcess.savefig` draws the figure
 here instead: the worker makes the command faster, never different.
@@ -23,8 +23,18 @@ import subprocess
 import sys
 from pathlib import Path
 
-#: The worker: this module run as a program.
-WORKER = [sys.executable, "-m", __name__]
+#: The folder this brdffit is imported from (a source tree or site-packages).
+_ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+#: The worker: :func:`main` of this module, in a Python that imports this same brdffit (its folder
+#: goes first on ``sys.path`` only where another brdffit, or none, would be found: never
+#: site-packages ahead of the standard library).
+WORKER = [sys.executable, "-c",
+          "import os, sys, importlib.util as u\n"
+          "s = u.find_spec('brdffit')\n"
+          "if s is None or os.path.dirname(os.path.dirname(os.path.realpath(s.origin))) != sys.argv[1]:\n"
+          "    sys.path.insert(0, sys.argv[1])\n"
+          "from brdffit._figure_process import main\n"
+          "main()\n", _ROOT]
 #: Seconds to wait for the worker's PNG before drawing it here (a figure takes ~1 s).
 WAIT_S = 300.0
 
@@ -38,12 +48,9 @@ class FigureProcess:
         self._proc = None
         if not command[0]:  # no Python executable known (an embedded interpreter): draw here
             return
-        # The worker imports the same brdffit as this process, wherever that comes from.
-        root = str(Path(__file__).resolve().parents[1])
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
         try:
             self._proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.DEVNULL, env=env, start_new_session=True)
+                                          stderr=subprocess.DEVNULL, start_new_session=True)
         except OSError:
             self._proc = None
 
@@ -107,6 +114,3 @@ def main() -> None:
         os._exit(1)
     os._exit(0)
 
-
-if __name__ == "__main__":
-    main()
