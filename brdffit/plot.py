@@ -13,6 +13,8 @@ in Jupyter (it has ``_repr_png_``) and is written with ``fig.savefig(path)``.
 - :func:`usage`: where a scene looks at a material (SPEC 12); :func:`scene_panel`: a scene rendered with the
   reference | with the fit | FLIP map.
 - :func:`pareto`: error against run time of a :class:`~brdffit.fitting.compare.Report`.
+- :func:`fit_figure`: the figure ``brdffit fit`` writes; :func:`fit_figure_data` makes its content
+  (:class:`FigureData`: arrays and text) without matplotlib, to be drawn here or in another process.
 - :func:`parameter_maps`: the maps ``fit_btf`` made; :func:`btf_panel`: BTF photographs against
   renders of the maps.
 
