@@ -112,3 +112,34 @@ def test_albedo_closed_forms():
     for n in (1.0, 20.0, 1e3, 1e4):
         a = np.asarray(brdffit.albedo("phong", {"kd": 0.1, "ks": 0.6, "n": n}, np.array([0.0, 0.0, 1.0])))
         np.testing.assert_allclose(a, 0.7, rtol=1e-4, err_msg=f"n={n}")
+
+
+@pytest.mark.parametrize("name", ["ggx", "ward"])
+def test_albedo_is_the_same_at_every_view_azimuth_and_continuous_at_the_normal(name):
+    """The quadrature turns with the mirror direction r of wo (two tangents of r); an isotropic
+    model's albedo therefore depends on theta alone, to rounding: views in the xz and yz planes
+    (where r has no x component), and at the normal (r = z, where the tangents are chosen, not
+    derived) against a view 1e-7 rad off it."""
+    model = get(name)
+    p = model.defaults()
+    theta = np.deg2rad(35.0)
+    planes = np.array([[np.sin(theta), 0.0, np.cos(theta)], [0.0, np.sin(theta), np.cos(theta)],
+                       [0.0, -np.sin(theta), np.cos(theta)]])
+    a = np.asarray(brdffit.albedo(model, p, planes))
+    assert np.all(np.isfinite(a))
+    np.testing.assert_allclose(a[1:], a[:1].repeat(2, axis=0), rtol=1e-9)
+    eps = 1e-7
+    normal = np.array([[0.0, 0.0, 1.0], [np.sin(eps), 0.0, np.cos(eps)]])
+    a = np.asarray(brdffit.albedo(model, p, normal))
+    np.testing.assert_allclose(a[0], a[1], rtol=1e-6)
+
+
+def test_albedo_takes_any_numeric_direction_as_float64():
+    """Integer and float32 view directions are read as float64 (the sum of 65,536 weighted terms
+    would lose ~1e-4 in float32): the same albedo as from the float64 direction."""
+    p = {"kd": 0.1, "ks": 0.6, "alpha": 0.2, "f0": 0.04}
+    ref = np.asarray(brdffit.albedo("ggx", p, np.array([0.0, 0.0, 1.0])))
+    for wo in (np.array([0, 0, 1]), np.array([0.0, 0.0, 1.0], np.float32)):
+        a = brdffit.albedo("ggx", p, wo)
+        assert a.dtype == np.float64
+        np.testing.assert_allclose(np.asarray(a), ref, rtol=1e-12)
