@@ -88,16 +88,14 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 @click.option("--scene", default=None, type=click.Path(path_type=str), help="Mitsuba 3 scene: fit where it looks at --material.")
 @click.option("--material", default=None, help="Id of the BSDF in --scene that this fit is for.")
-def fit_command(source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
-                force, scene, material) -> int:
+def fit_command(**options) -> int:
     """Fit one model to one measurement; writes fit.json and fit.png."""
     from .._figure_process import FigureProcess
 
     # fit.png is drawn by a worker that imports matplotlib beside this process's imports and fit
     # (on another core): started before anything here imports JAX.
     with FigureProcess() as figure:
-        return _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
-                    force, scene, material)
+        return _fit(figure, **options)
 
 
 def _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items, fix_items, physical, out,
