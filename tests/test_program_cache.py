@@ -128,3 +128,29 @@ def test_a_program_is_kept_per_xla_flags(tmp_path, monkeypatch):
         program = cache.load_or_compile(("xla_flags_test",), lambda: (lambda x: 2.0 * x + 1.0), example)
         np.testing.assert_allclose(program(*example), [1.0, 3.0, 5.0])
     assert len(list((tmp_path / "brdffit-programs").glob("*.bin"))) == 2
+
+
+def test_programs_on_disk_are_pruned_least_recently_used_first(tmp_path, monkeypatch):
+    """Past ``PROGRAMS_MAX_BYTES`` the programs least recently written or loaded go first; the one
+    just written stays (every brdffit version keys its own programs: without a limit they pile up)."""
+    import numpy as np
+
+    from brdffit.fitting import cache
+
+    monkeypatch.setitem(cache._STATE, "dir", tmp_path)
+    folder = tmp_path / "brdffit-programs"
+    example = (np.arange(3.0),)
+    files = {}
+    for name, scale in (("a", 2.0), ("b", 3.0)):
+        before = set(folder.glob("*.bin"))
+        cache.load_or_compile((f"prune_test_{name}",), lambda s=scale: (lambda x: s * x), example)
+        (files[name],) = set(folder.glob("*.bin")) - before
+    os.utime(files["a"], (1_000_000, 1_000_000))  # a written long before b ...
+    os.utime(files["b"], (2_000_000, 2_000_000))
+    program = cache.load_or_compile(("prune_test_a",), lambda: (lambda x: 2.0 * x), example)  # ... and loaded now
+    np.testing.assert_allclose(program(*example), [0.0, 2.0, 4.0])
+    monkeypatch.setattr(cache, "PROGRAMS_MAX_BYTES", files["a"].stat().st_size + files["b"].stat().st_size + 1024)
+    before = set(folder.glob("*.bin"))
+    cache.load_or_compile(("prune_test_c",), lambda: (lambda x: 5.0 * x), example)
+    (c,) = set(folder.glob("*.bin")) - before
+    assert sorted(folder.glob("*.bin")) == sorted([files["a"], c])

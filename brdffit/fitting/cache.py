@@ -58,6 +58,41 @@ def _count_jax_cache_hits(event: str, **kwargs) -> None:
         _STATE["jax_hits"] += 1
 
 
+#: The compiled programs kept on disk (``load_or_compile``) are pruned, least recently used first,
+#: when together they pass this size. A program takes 0.01-1.5 MB, and every brdffit version and
+#: XLA_FLAGS setting keys its own: without a limit, programs no release will load again pile up.
+PROGRAMS_MAX_BYTES = 512 * 2**20
+
+
+def _prune(folder: Path, keep: Path) -> None:
+    """Delete the least recently used programs in ``folder`` (a load marks its file used) until
+    they take at most ``PROGRAMS_MAX_BYTES``; never ``keep`` (the program just written). Best
+    effort: a file another process removed first, or a read-only folder, is passed over."""
+    entries = []
+    try:
+        with os.scandir(folder) as it:
+            for entry in it:
+                if entry.name.endswith(".bin"):
+                    try:
+                        st = entry.stat()
+                    except OSError:
+                        continue
+                    entries.append((st.st_mtime, st.st_size, entry.path))
+    except OSError:
+        return
+    total = sum(size for _, size, _ in entries)
+    for _, size, path in sorted(entries):  # oldest use first
+        if total <= PROGRAMS_MAX_BYTES:
+            break
+        if path == str(keep):
+            continue
+        try:
+            os.unlink(path)
+        except OSError:
+            continue
+        total -= size
+
+
 def cache_enabled() -> bool:
     return _STATE["dir"] is not None
 
@@ -170,8 +205,13 @@ def load_or_compile(key, build, example):
                     from jax._src.lax.linalg import initialize_lapack  # jax is pinned (pyproject)
 
                     initialize_lapack()
-                return wrap(serialize_executable.deserialize_and_load(saved["program"], saved["in_tree"],
-                                                                      saved["out_tree"]))
+                program = wrap(serialize_executable.deserialize_and_load(saved["program"], saved["in_tree"],
+                                                                         saved["out_tree"]))
+                try:  # used now: the last to be pruned (_prune)
+                    os.utime(file)
+                except OSError:
+                    pass
+                return program
         except Exception:  # noqa: BLE001 - a damaged or foreign file: compile again below
             pass
     fn = build()
@@ -209,4 +249,6 @@ def load_or_compile(key, build, example):
         os.replace(tmp, file)  # atomic: concurrent processes write equivalent programs
     except OSError:  # a full disk or a read-only folder: no disk copy, no partial file
         tmp.unlink(missing_ok=True)
+    else:
+        _prune(file.parent, keep=file)
     return wrap(compiled)
