@@ -126,7 +126,7 @@ def test_albedo_is_the_same_at_every_view_azimuth_and_continuous_at_the_normal(n
     planes = np.array([[np.sin(theta), 0.0, np.cos(theta)], [0.0, np.sin(theta), np.cos(theta)],
                        [0.0, -np.sin(theta), np.cos(theta)]])
     a = np.asarray(brdffit.albedo(model, p, planes))
-    assert np.all(np.isfinite(a))
+    assert a.shape == (3, 3) and np.all(np.isfinite(a))
     np.testing.assert_allclose(a[1:], a[:1].repeat(2, axis=0), rtol=1e-9)
     eps = 1e-7
     normal = np.array([[0.0, 0.0, 1.0], [np.sin(eps), 0.0, np.cos(eps)]])
