@@ -209,3 +209,34 @@ def test_format_range_is_the_notation_of_the_model_files(lower, upper, text):
     from brdffit.models.base import format_range
 
     assert format_range(lower, upper) == text
+
+
+def test_two_diffuse_terms_are_refused_with_both_named():
+    with pytest.raises(ValueError) as err:
+        get("oren_nayar+ggx+lambert")
+    assert str(err.value) == "a composite has one diffuse term: oren_nayar and lambert would both be diffuse"
+
+
+@pytest.mark.parametrize("name, owner", [("lambert+ggx+ggx", 0), ("ggx+oren_nayar", 1), ("oren_nayar+ggx", 0),
+                                         ("ggx+blinn_phong", 0), ("ashikhmin_shirley+ggx", 1),
+                                         ("ashikhmin_shirley+ashikhmin_shirley", None)])
+def test_a_composite_is_the_sum_of_its_components_with_one_owner_of_kd(name, owner):
+    """The naming scheme of ``compose`` (its docstring), evaluated: f is the sum of the components'
+    own f, the shared kd going to the diffuse component (else the first component with a kd) and
+    every other component's kd held at 0; without any kd there is none."""
+    wi, wo = _pairs()
+    m = get(name)
+    rng = np.random.default_rng(3)
+    params = {p.name: rng.uniform(0.2, 0.6, m.size(p)) for p in m.params}
+    expected, seen = 0.0, {}
+    for i, c in enumerate(m.components):
+        seen[c.name] = seen.get(c.name, 0) + 1
+        own = {}
+        for q in c.params:
+            if q.name == "kd":
+                own["kd"] = params["kd"] if i == owner else np.zeros(c.size(q))
+            else:
+                own[q.name] = params[f"{c.name}{seen[c.name]}.{q.name}"]
+        expected = expected + np.asarray(c.eval(own, wi, wo))
+    assert ("kd" in m.param_names) == (owner is not None)
+    np.testing.assert_allclose(np.asarray(m.eval(params, wi, wo)), expected, rtol=1e-12)
