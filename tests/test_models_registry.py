@@ -240,3 +240,30 @@ def test_a_composite_is_the_sum_of_its_components_with_one_owner_of_kd(name, own
         expected = expected + np.asarray(c.eval(own, wi, wo))
     assert ("kd" in m.param_names) == (owner is not None)
     np.testing.assert_allclose(np.asarray(m.eval(params, wi, wo)), expected, rtol=1e-12)
+
+
+def test_a_composite_names_cites_and_documents_its_components():
+    m = get("lambert+ggx+ggx")
+    lam, ggx = get("lambert"), get("ggx")
+    assert m.name == "lambert+ggx+ggx"
+    assert m.citation == f"{lam.citation}; {ggx.citation}"  # each paper once
+    assert m.doc.startswith("Composite model lambert+ggx+ggx: the sum of its components' BRDFs.\n\n")
+    assert "Naming scheme" in m.doc  # compose's own docstring: how the parameters are named
+    assert m.doc.endswith(f"\n\nComponents\n----------\nlambert: {lam.citation}\nggx: {ggx.citation}\nggx: {ggx.citation}")
+
+
+def test_lobe_width_is_log_roughness_minus_log_exponent_summed_over_the_lobe():
+    """The key that orders lobes of one kind (compose's docstring): for a two-roughness Ward lobe
+    the log of the product, for Blinn-Phong minus the log of the exponent; ks plays no part."""
+    from brdffit.models.compose import lobe_width
+
+    ward = get("ward+ward")
+    values = {"ward1.ks": np.array([0.3]), "ward1.alpha_x": np.array([0.5]), "ward1.alpha_y": np.array([0.1])}
+    assert lobe_width(ward, ward.lobes[0], values) == pytest.approx(np.log(0.05), rel=1e-12)
+    phong = get("lambert+blinn_phong+blinn_phong")
+    for n in (200.0, 0.5):  # exponents need only be > 0
+        values = {"blinn_phong2.ks": np.array([0.3, 0.2, 0.1]), "blinn_phong2.n": np.array([n])}
+        assert lobe_width(phong, phong.lobes[1], values) == pytest.approx(-np.log(n), rel=1e-12)
+    # 0-d arrays are arrays too
+    values = {"ward1.ks": np.array(0.3), "ward1.alpha_x": np.array(0.2), "ward1.alpha_y": np.array(0.3)}
+    assert lobe_width(ward, ward.lobes[0], values) == pytest.approx(np.log(0.06), rel=1e-12)
