@@ -267,3 +267,10 @@ def test_lobe_width_is_log_roughness_minus_log_exponent_summed_over_the_lobe():
     # 0-d arrays are arrays too
     values = {"ward1.ks": np.array(0.3), "ward1.alpha_x": np.array(0.2), "ward1.alpha_y": np.array(0.3)}
     assert lobe_width(ward, ward.lobes[0], values) == pytest.approx(np.log(0.06), rel=1e-12)
+
+
+def test_a_composite_keeps_its_components_channel_count():
+    from brdffit.models.compose import compose
+
+    mono = compose([get("lambert").with_channels(1), get("ggx").with_channels(1)])
+    assert mono.channels == 1 and mono.size(mono.param("kd")) == 1
