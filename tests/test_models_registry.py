@@ -274,3 +274,15 @@ def test_a_composite_keeps_its_components_channel_count():
 
     mono = compose([get("lambert").with_channels(1), get("ggx").with_channels(1)])
     assert mono.channels == 1 and mono.size(mono.param("kd")) == 1
+
+
+def test_lookup_errors_name_the_known_models_and_what_lobes_applies_to():
+    from brdffit.models import names
+
+    with pytest.raises(KeyError) as err:
+        get("lambert+nosuch")
+    assert err.value.args[0] == f"unknown model 'nosuch' in 'lambert+nosuch'; known: {', '.join(names())}"
+    assert "ashikhmin_shirley, blinn_phong, cook_torrance" in err.value.args[0]
+    with pytest.raises(KeyError) as err:
+        get("ggx", lobes=2)
+    assert err.value.args[0] == "lobes= applies to 'lafortune' only, not 'ggx'"
