@@ -35,9 +35,8 @@ Conventions shared by the figures
 
 from __future__ import annotations
 
-import io
-
 import dataclasses
+import io
 
 import numpy as np
 

@@ -4,9 +4,9 @@ generated test BTFs (:mod:`brdffit.btf.generate`)."""
 
 from __future__ import annotations
 
-from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 import importlib
+
+from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 
 _LAZY = {
     "BTF": "brdffit.btf.reader",

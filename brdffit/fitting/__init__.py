@@ -15,7 +15,6 @@ Compiled code is kept on disk (``cache``).
 from __future__ import annotations
 
 from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 from . import cache as _cache
 
 _cache.enable()  # before anything compiles

@@ -21,8 +21,6 @@ here, so that the CLI can always print one line that names the file (SPEC 7).
 
 from __future__ import annotations
 
-from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 import contextvars
 import importlib
 import os
@@ -30,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 from ..errors import InputError, UsageError
 from ..measurement import Measurement
 

@@ -8,13 +8,12 @@ spaces are ignored) and multi-lobe Lafortune models (``get("lafortune", lobes=3)
 
 from __future__ import annotations
 
-from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 import functools
 import importlib
 import pkgutil
 import re
 
+from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 from .base import Model, Param
 
 _REGISTRY: dict[str, Model] = {}

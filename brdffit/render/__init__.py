@@ -9,7 +9,6 @@ EXRs, PNG panels and metrics. Mitsuba is imported only in this package (through
 from __future__ import annotations
 
 from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 from .bsdf import Source, as_source
 from .scene import render_sphere
 from .validate import Validation, default_lights, validate

@@ -4,7 +4,6 @@ from it, and the scene rendered with a fit beside it rendered with the reference
 from __future__ import annotations
 
 from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
-
 from .render import SceneValidation, render_scene, validate_scene
 from .usage import Usage, fit_data, rusinkiewicz, scene_usage
 
