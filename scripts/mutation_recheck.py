@@ -75,9 +75,20 @@ def main(argv: list[str]) -> int:
     return 0
 
 
+def mutant_env(mutant: str) -> dict[str, str]:
+    """The environment a mutant's tests run in: without the shared data, and without brdffit's disk
+    cache of compiled programs (it keys them by the source, one file for every mutant here, so a
+    mutant would load another's program: see scripts/mutation_run.sh); JAX's own cache, keyed by
+    the compiled code, in mutants/.jax-cache."""
+    env = {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1",
+           "BRDFFIT_CACHE": "off", "JAX_COMPILATION_CACHE_DIR": str(Path("mutants/.jax-cache").resolve()),
+           "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+    return env
+
+
 def _pytest(mutant: str, files: list[str]) -> subprocess.CompletedProcess | None:
     """The test files' run with ``mutant`` active (None: past RECHECK_TIMEOUT, e.g. an endless loop)."""
-    env = {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1"}
+    env = mutant_env(mutant)
     env.pop("PYTHONPATH", None)  # the mutated copy in mutants/ must be what the tests import
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "not slow", *files]
     try:

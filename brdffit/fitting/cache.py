@@ -8,6 +8,13 @@ batch) are kept whole, compiled, by :func:`load_or_compile` (a second process lo
 or lowering); everything else goes through JAX's own persistent cache, enabled when
 ``brdffit.fitting`` is imported (before anything compiles), which keeps every compilation however
 short (JAX keeps only those over 1 s by default; ours take 0.1-3 s each).
+
+A kept program is found again by brdffit's fitting and model sources (their hash), the model's
+name and the shapes, not by what its code computes: source that picks its behaviour at run time
+from outside itself must run with the cache off. mutmut's copy is such source (one file holds
+every mutant, chosen by ``MUTANT_UNDER_TEST``): with the cache on, every mutant loaded the first
+program kept (``scripts/mutation_run.sh`` turns it off; JAX's own cache, keyed by the compiled
+code, still serves there).
 """
 
 from __future__ import annotations
@@ -44,13 +51,20 @@ def enable() -> Path | None:
     except OSError:
         return None  # a read-only home: compile every time rather than fail
     jax.config.update("jax_compilation_cache_dir", str(path))
-    if "jax_hits" not in _STATE:
-        _STATE["jax_hits"] = 0
-        jax.monitoring.register_event_listener(_count_jax_cache_hits)
+    _listen_for_jax_hits()
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _STATE["dir"] = path
     return path
+
+
+def _listen_for_jax_hits() -> None:
+    """Count JAX's persistent-cache hits (``load_or_compile`` must know whether JAX answered)."""
+    import jax
+
+    if "jax_hits" not in _STATE:
+        _STATE["jax_hits"] = 0
+        jax.monitoring.register_event_listener(_count_jax_cache_hits)
 
 
 def _count_jax_cache_hits(event: str, **kwargs) -> None:
@@ -215,6 +229,7 @@ def load_or_compile(key, build, example):
         except Exception:  # noqa: BLE001 - a damaged or foreign file: compile again below
             pass
     fn = build()
+    _listen_for_jax_hits()  # also when the folder was set without enable() (the tests set it)
 
     def compile_salted(salt: int):
         """Compiled program returning (outputs, salt); and whether JAX's own cache handed it back."""
