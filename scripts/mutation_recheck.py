@@ -69,10 +69,17 @@ def main(argv: list[str]) -> int:
                 return 1
             clean_packages.add(pkg)
         r = _pytest(name, only or test_files(name))
-        done[name] = TIMEOUT if r is None else KILLED if r.returncode == 1 else SURVIVED
+        done[name] = TIMEOUT if r is None else KILLED if _detected(r) else SURVIVED
         print(f"{done[name]:<9} {name}", flush=True)
         RECHECK.write_text(json.dumps(done, indent=1))
     return 0
+
+
+def _detected(r: subprocess.CompletedProcess) -> bool:
+    """A test failed (exit 1), or the mutated code raised while the test modules were imported
+    (pytest exits 2, "error during collection": e.g. a parameter table that no longer builds; mutmut
+    itself sees such a child die, exit 255, and calls it a timeout)."""
+    return r.returncode == 1 or (r.returncode == 2 and " during collection" in r.stdout)
 
 
 def mutant_env(mutant: str) -> dict[str, str]:
