@@ -1,6 +1,7 @@
-"""``models.base.Param``: the checks a model author's parameter table goes through, each message
-naming the parameter and the problem, and the rule that picks a log axis when none is given
-(module docstring of ``brdffit.models.base``: a positive lower bound and upper / lower >= 100)."""
+"""``models.base.Param`` and ``Model``: the checks a model author's parameter table goes through,
+each message naming the parameter (or model) and the problem, and the rule that picks a log axis
+when none is given (module docstring of ``brdffit.models.base``: a positive lower bound and
+upper / lower >= 100)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import re
 
 import pytest
 
-from brdffit.models.base import Param
+from brdffit.models.base import Lobe, Model, Param
 
 
 def _param(**changes) -> Param:
@@ -71,3 +72,13 @@ def test_the_axis_is_log_for_a_positive_lower_bound_and_a_ratio_of_at_least_100(
 def test_a_stated_scale_is_kept():
     assert _param(scale="linear", lower=1e-4, upper=1.0, default=0.5).scale == "linear"
     assert _param(scale="log", lower=0.5, upper=1.0, default=0.7).scale == "log"
+
+
+def test_a_lobe_naming_unknown_parameters_is_refused():
+    params = (_param(name="kd"), _param(name="ks"), _param(name="n", lower=1.0, upper=100.0, default=10.0))
+    lobes = (Lobe("mine", ("ks", "m")),)
+    with pytest.raises(ValueError, match=f"^{re.escape(f'model {chr(39)}mine{chr(39)}: lobe {lobes[0]} names unknown parameters')}$"):
+        Model("mine", params, lambda p, wi, wo: p["kd"], "", lobes=lobes)
+    model = Model("mine", params, lambda p, wi, wo: p["kd"], "")
+    assert model.lobes == (Lobe("mine", ("ks", "n")),)  # by default: every parameter but kd
+    assert Model("flat", params[:1], lambda p, wi, wo: p["kd"], "").lobes == ()
