@@ -87,10 +87,9 @@ def mutant_env(mutant: str) -> dict[str, str]:
     cache of compiled programs (it keys them by the source, one file for every mutant here, so a
     mutant would load another's program: see scripts/mutation_run.sh); JAX's own cache, keyed by
     the compiled code, in mutants/.jax-cache."""
-    env = {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1",
-           "BRDFFIT_CACHE": "off", "JAX_COMPILATION_CACHE_DIR": str(Path("mutants/.jax-cache").resolve()),
-           "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
-    return env
+    return {**os.environ, "MUTANT_UNDER_TEST": mutant, "BRDFFIT_DATA": "/nonexistent", "PY_IGNORE_IMPORTMISMATCH": "1",
+            "BRDFFIT_CACHE": "off", "JAX_COMPILATION_CACHE_DIR": str(Path("mutants/.jax-cache").resolve()),
+            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
 
 
 def _pytest(mutant: str, files: list[str]) -> subprocess.CompletedProcess | None:

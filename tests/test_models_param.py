@@ -77,7 +77,8 @@ def test_a_stated_scale_is_kept():
 def test_a_lobe_naming_unknown_parameters_is_refused():
     params = (_param(name="kd"), _param(name="ks"), _param(name="n", lower=1.0, upper=100.0, default=10.0))
     lobes = (Lobe("mine", ("ks", "m")),)
-    with pytest.raises(ValueError, match=f"^{re.escape(f'model {chr(39)}mine{chr(39)}: lobe {lobes[0]} names unknown parameters')}$"):
+    message = f"model {'mine'!r}: lobe {lobes[0]} names unknown parameters"
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
         Model("mine", params, lambda p, wi, wo: p["kd"], "", lobes=lobes)
     model = Model("mine", params, lambda p, wi, wo: p["kd"], "")
     assert model.lobes == (Lobe("mine", ("ks", "n")),)  # by default: every parameter but kd

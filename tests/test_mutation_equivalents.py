@@ -23,19 +23,14 @@ def test_every_explained_mutant_is_named_once_with_its_change_and_reason():
         assert set(entry) == {"change", "reason"} and entry["change"].strip() and entry["reason"].strip(), name
 
 
-def test_mutants_run_without_the_disk_cache_of_compiled_programs():
+def test_mutants_run_without_the_disk_cache_of_compiled_programs(monkeypatch):
     """brdffit's disk cache finds a compiled program by the hash of its source; mutmut's copy is one
     source for every mutant (``MUTANT_UNDER_TEST`` picks one at run time), so with the cache on a
     mutant loads the program of whichever ran first (seen: ``ggx_ndf__mutmut_8`` fitted the
     unmutated GGX, loss 3.5e-31 instead of 7.4e-3). Both ways of running mutants turn it off."""
-    import sys
-
     script = (REPO / "scripts" / "mutation_run.sh").read_text()
     assert re.search(r"^export BRDFFIT_CACHE=off\b", script, re.M), "scripts/mutation_run.sh"
-    sys.path.insert(0, str(REPO / "scripts"))
-    try:
-        from mutation_recheck import mutant_env
-    finally:
-        sys.path.remove(str(REPO / "scripts"))
+    monkeypatch.syspath_prepend(str(REPO / "scripts"))
+    from mutation_recheck import mutant_env
     env = mutant_env("brdffit.models.ggx.x_ggx_ndf__mutmut_8")
     assert env["BRDFFIT_CACHE"] == "off" and env["MUTANT_UNDER_TEST"].endswith("__mutmut_8")

@@ -51,7 +51,6 @@ def enable() -> Path | None:
     except OSError:
         return None  # a read-only home: compile every time rather than fail
     jax.config.update("jax_compilation_cache_dir", str(path))
-    _listen_for_jax_hits()
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _STATE["dir"] = path
@@ -229,7 +228,7 @@ def load_or_compile(key, build, example):
         except Exception:  # noqa: BLE001 - a damaged or foreign file: compile again below
             pass
     fn = build()
-    _listen_for_jax_hits()  # also when the folder was set without enable() (the tests set it)
+    _listen_for_jax_hits()  # here, its only reader: also when the folder was set without enable()
 
     def compile_salted(salt: int):
         """Compiled program returning (outputs, salt); and whether JAX's own cache handed it back."""
