@@ -26,15 +26,22 @@ bench: $(STAMP)
 # one file; KEEP=1 keeps mutmut's earlier results (mutants/) instead of starting afresh. Survivors
 # and timeouts are then re-run in fresh processes against their package's tests (code run at import
 # time is credited by mutmut to one test only): scripts/mutation_recheck.py.
+# SAMPLE=400 runs a seeded uniform sample of 400 mutants per package instead (SEED=...; the report
+# adds each score's 95 % interval): scripts/mutation_sample.py.
 # Measured rates and the full-run estimate: scripts/mutation_scores.md.
 MUTATE ?= brdffit.models.* brdffit.fitting.* brdffit.io.*
 MUTATION_JOBS ?= 2
+SEED ?= 0
 mutation: $(STAMP)
 	$(VENV)/bin/mutmut --version >/dev/null 2>&1 || $(VENV)/bin/python -m pip install "mutmut==3.8.1"
 	$(if $(KEEP),,rm -rf mutants)
-	VENV=$(VENV) MUTATION_JOBS=$(MUTATION_JOBS) scripts/mutation_run.sh $(foreach p,$(MUTATE),"$(p)") || true
+	$(if $(SAMPLE),mkdir -p mutants && $(VENV)/bin/python scripts/mutation_sample.py $(SAMPLE) \
+	    $(foreach p,$(MUTATE),"$(p)") --seed $(SEED) > mutants/sample.txt)
+	VENV=$(VENV) MUTATION_JOBS=$(MUTATION_JOBS) scripts/mutation_run.sh \
+	    $(if $(SAMPLE),$$(cat mutants/sample.txt),$(foreach p,$(MUTATE),"$(p)")) || true
 	nice -n 19 $(VENV)/bin/python scripts/mutation_recheck.py $(foreach p,$(MUTATE),"$(p)")
-	$(VENV)/bin/python scripts/mutation_report.py $(foreach p,$(MUTATE),"$(p)")
+	$(VENV)/bin/python scripts/mutation_report.py $(if $(SAMPLE),--sample mutants/sample.txt) \
+	    $(foreach p,$(MUTATE),"$(p)")
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis mutants

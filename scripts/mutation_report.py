@@ -18,7 +18,11 @@ count as killed; those that ran past its time limit, as timeouts.
 Score = (killed + timeout + explained) / (all checked mutants). A timeout is a mutant that made the
 tests run past mutmut's CPU-time limit (an endless loop or a solver that never stops): detected.
 "Not checked" mutants (a run cut short or never started) are counted apart and not in the score.
-Usage: python scripts/mutation_report.py [PATTERN ...]   (run from the repository root)
+With ``--sample FILE`` (a list of names from scripts/mutation_sample.py), only those mutants count,
+and each row also gives the 95 % Wilson interval of the package's score: what the sample says
+about all its mutants. The checked ones must be a uniform sample: run the list, or a prefix of it.
+
+Usage: python scripts/mutation_report.py [--sample FILE] [PATTERN ...]   (run from the repository root)
 """
 
 from __future__ import annotations
@@ -73,8 +77,13 @@ def mutated_lines(name: str) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
+    sample = None
+    if argv[:1] == ["--sample"]:
+        sample = set(Path(argv[1]).read_text().split())
+        argv = argv[2:]
     patterns = [p.strip('"') for p in argv] or ["*"]
-    results = {n: s for n, s in load_results(Path(".")).items() if any(fnmatch.fnmatch(n, p) for p in patterns)}
+    results = {n: s for n, s in load_results(Path(".")).items()
+               if any(fnmatch.fnmatch(n, p) for p in patterns) and (sample is None or n in sample)}
     equivalents = tomllib.loads(EQUIVALENTS.read_text())["mutants"] if EQUIVALENTS.exists() else {}
     by_pkg: dict[str, Counter] = defaultdict(Counter)
     survivors, stale = [], []
@@ -97,14 +106,14 @@ def main(argv: list[str]) -> int:
         if status in (SURVIVED, NO_TESTS, "suspicious"):
             survivors.append((name, status))
     print(f"{'package / file':<34} {'killed':>7} {'timeout':>8} {'explained':>10} {'survived':>9} "
-          f"{'unchecked':>10} {'score':>7}")
+          f"{'unchecked':>10} {'score':>7}" + ("   95 % interval (sample)" if sample else ""))
     total = Counter()
     for key in sorted(by_pkg, key=lambda k: (k.split(".")[1], k.count("."), k)):
         c = by_pkg[key]
         if key.count(".") == 1:
             total.update(c)
-        _row(key if key.count(".") == 1 else "  " + key.split(".")[-1] + ".py", c)
-    _row("all", total)
+        _row(key if key.count(".") == 1 else "  " + key.split(".")[-1] + ".py", c, sample is not None)
+    _row("all", total, sample is not None)
     if rechecked:
         print(f"({rechecked} of the killed: mutmut's survivors killed by scripts/mutation_recheck.py)")
     for name in stale:
@@ -116,12 +125,24 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-def _row(label: str, c: Counter) -> None:
+def _row(label: str, c: Counter, interval: bool = False) -> None:
     detected = c[KILLED] + c[TIMEOUT] + c["explained"]
     checked = sum(v for k, v in c.items() if k != UNCHECKED)
     score = f"{100 * detected / checked:.1f}%" if checked else "-"
     bad = checked - detected
-    print(f"{label:<34} {c[KILLED]:>7} {c[TIMEOUT]:>8} {c['explained']:>10} {bad:>9} {c[UNCHECKED]:>10} {score:>7}")
+    line = f"{label:<34} {c[KILLED]:>7} {c[TIMEOUT]:>8} {c['explained']:>10} {bad:>9} {c[UNCHECKED]:>10} {score:>7}"
+    if interval and checked:
+        low, high = wilson_interval(detected, checked)
+        line += f"   {100 * low:.1f}-{100 * high:.1f}%"
+    print(line)
+
+
+def wilson_interval(detected: int, checked: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion (it stays inside [0, 1] and is sound at 100 %)."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(detected, checked).proportion_ci(confidence_level=0.95, method="wilson")
+    return ci.low, ci.high
 
 
 if __name__ == "__main__":

@@ -6,8 +6,11 @@ that changes nothing observable."""
 from __future__ import annotations
 
 import re
+from collections import Counter
 import tomllib
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -34,3 +37,29 @@ def test_mutants_run_without_the_disk_cache_of_compiled_programs(monkeypatch):
     from mutation_recheck import mutant_env
     env = mutant_env("brdffit.models.ggx.x_ggx_ndf__mutmut_8")
     assert env["BRDFFIT_CACHE"] == "off" and env["MUTANT_UNDER_TEST"].endswith("__mutmut_8")
+
+
+def test_sampled_mutation_scores_carry_the_wilson_interval_of_published_examples(monkeypatch):
+    """``make mutation SAMPLE=n`` reports a package's score from a sample, with its 95 % interval.
+    Pinned: the score (Wilson) intervals of Newcombe (1998), Stat. Med. 17:857, Table I, method 3."""
+    monkeypatch.syspath_prepend(str(REPO / "scripts"))
+    from mutation_report import wilson_interval
+    for (k, n), expected in {(81, 263): (0.2553, 0.3662), (15, 148): (0.0624, 0.1605),
+                             (0, 20): (0.0, 0.1611), (1, 29): (0.0061, 0.1718)}.items():
+        assert wilson_interval(k, n) == pytest.approx(expected, abs=6e-5), (k, n)
+
+
+def test_a_mutant_sample_is_seeded_uniform_per_package_and_any_prefix_covers_every_package(monkeypatch):
+    monkeypatch.syspath_prepend(str(REPO / "scripts"))
+    from mutation_sample import draw
+    names = [f"brdffit.fitting.solve.x_f__mutmut_{i}" for i in range(300)] + \
+            [f"brdffit.io.npz.x_g__mutmut_{i}" for i in range(40)]
+    sample = draw(names, 30, seed=7)
+    assert sample == draw(list(reversed(names)), 30, seed=7)  # the seed fixes it, not the input order
+    assert sample != draw(names, 30, seed=8)
+    assert len(set(sample)) == 60 and set(sample) <= set(names)
+    assert sum(s.startswith("brdffit.io.") for s in sample) == 30  # n per package, whatever its size
+    assert {s.split(".")[1] for s in sample[:10]} == {"fitting", "io"}
+    # uniform: over many seeds every fitting mutant is drawn about 30/300 of the time
+    counts = Counter(s for seed in range(400) for s in draw(names, 30, seed) if ".fitting." in s)
+    assert len(counts) == 300 and 20 <= min(counts.values()) and max(counts.values()) <= 65
