@@ -1,0 +1,72 @@
+"""fit_batch's options beyond the defaults: given starts (with and without the grid), the progress bar,
+and that each fit's metrics and Gauss-Newton matrix come out of the batch program (a per-fit program
+after it would cost a compile and a call per fit). Small Lambert and GGX problems."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import models
+from brdffit.fitting import api, fit, fit_batch
+from test_fit_core import TRUE, _measurement
+
+
+@pytest.fixture(scope="module")
+def two():
+    return [_measurement({**TRUE, "alpha": [a]}, n=200, noise=0.01, seed=i) for i, a in enumerate((0.2, 0.3))]
+
+
+def test_given_starts_without_the_grid_are_where_each_fit_starts(two):
+    starts = [{**TRUE, "alpha": [0.15]}, {**TRUE, "alpha": [0.4], "f0": [0.5]}]
+    rs = fit_batch(two, "ggx", starts=starts, grid=False, max_steps=3)
+    for r, s in zip(rs, starts):
+        assert r.options["init"] == "given"
+        for name, value in s.items():
+            np.testing.assert_allclose(r.start[name], value, rtol=1e-12, err_msg=name)
+    # flat vectors (the model's free-parameter order) are the same starts
+    flat = [models.get("ggx").flatten(models.get("ggx").check_params(s)) for s in starts]
+    again = fit_batch(two, "ggx", starts=flat, grid=False, max_steps=3)
+    for r, q in zip(again, rs):
+        for name in q.params:
+            np.testing.assert_allclose(r.start[name], q.start[name], rtol=1e-12)
+            np.testing.assert_allclose(r.params[name], q.params[name], rtol=1e-9)
+
+
+def test_a_given_start_is_ranked_beside_the_grid(two):
+    """The truth as a start beats every grid point: the fit starts there."""
+    truth = [{**TRUE, "alpha": [a]} for a in (0.2, 0.3)]
+    rs = fit_batch(two, "ggx", starts=truth, max_steps=1, multistart=0)
+    for r, t in zip(rs, truth):
+        assert r.options["init"] == "grid"
+        np.testing.assert_allclose(r.start["alpha"], t["alpha"], rtol=1e-12)
+
+
+def test_starts_of_the_wrong_number_or_size_are_refused(two):
+    with pytest.raises(brdffit.UsageError, match="1 starts for 2 measurements"):
+        fit_batch(two, "ggx", starts=[TRUE])
+    with pytest.raises(brdffit.UsageError, match="starts have 3 values, model ggx has 8"):
+        fit_batch(two, "ggx", starts=np.zeros((2, 3)))
+
+
+def test_the_progress_bar_counts_the_fits(two, capsys):
+    rs = fit_batch(two, "lambert", progress=True)
+    shown = capsys.readouterr()
+    text = shown.out + shown.err
+    assert len(rs) == 2 and "fit_batch lambert" in text and "2/2" in text, text
+
+
+def test_each_fits_metrics_and_gauss_newton_matrix_come_from_the_batch_program(two, monkeypatch):
+    asked = []
+    real = api.compiled
+    monkeypatch.setattr(api, "compiled", lambda key, *a, **kw: (asked.append(key[0]), real(key, *a, **kw))[1])
+    batch = fit_batch(two, "ggx")
+    assert asked == [], asked  # no per-fit program ran after the batch
+    monkeypatch.undo()
+    for r, m in zip(batch, two):
+        single = fit(m, "ggx")
+        for name in ("alpha", "f0"):
+            np.testing.assert_allclose(r.stderr[name], single.stderr[name], rtol=2e-3, err_msg=name)
+        for key, value in single.metrics.items():
+            assert r.metrics[key] == pytest.approx(value, rel=2e-3, abs=1e-12), key
