@@ -207,8 +207,17 @@ def test_compare_report_and_select(tmp_path):
     assert len(rep.rows) == 8
     for row in rep.rows:
         assert all(f"loss_{k}" in row for k in LOSSES)
+    # one row per (model, loss, solver), each fit run with its row's loss
+    assert [(r["model"], r["loss"], r["solver"]) for r in rep.rows] == [
+        (name, x, s) for name in ("lambert", "ggx") for x in ("log", "l2") for s in ("lm", "scipy")]
+    assert [r.loss for r in rep.results] == [r["loss"] for r in rep.rows]
+    for s in ("lm", "scipy"):
+        by_loss = {r["loss"]: r for r in rep.rows if r["model"] == "ggx" and r["solver"] == s}
+        assert by_loss["l2"]["loss_l2"] <= by_loss["log"]["loss_l2"] * (1 + 1e-9)
+        assert by_loss["log"]["loss_log"] <= by_loss["l2"]["loss_log"] * (1 + 1e-9)
     best = rep.best("loss_log")
-    assert best["model"] == "ggx"
+    assert best["model"] == "ggx" and rep.best() == best  # the log loss by default
+    assert rep.best("loss_l2")["loss"] == "l2"
     csv_text = rep.to_csv(tmp_path / "r.csv")
     assert csv_text.count("\n") == 9 and csv_text.startswith("model,solver,loss")
     assert len(json.loads(rep.to_json())["rows"]) == 8

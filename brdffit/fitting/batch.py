@@ -187,10 +187,12 @@ def fit_batch(
 
     bar = None
     if progress:
+        from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+        # on stderr, like every progress display of brdffit (stdout stays for results)
         bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                       transient=False)
+                       console=Console(stderr=True), transient=False)
         bar.start()
         task = bar.add_task(f"fit_batch {mdl.name}", total=n)
     try:
