@@ -1,0 +1,38 @@
+"""The start grid's axis for one nonlinear parameter (brdffit.fitting.init, module docstring): inside
+the bounds with a 4 % margin at each end, logarithmic where the range is positive and spans a
+factor of 100 or more; where a bound is infinite, the parameter's declared bound, else its role's
+range, else (a role the table does not list: a user's model) [0, 1]. Values worked by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from brdffit.fitting.init import _axis
+from brdffit.models.base import Param
+
+INF = math.inf
+
+
+def _param(role, lower=-INF, upper=INF, default=0.5):
+    return Param("x", 1, lower, upper, default, role, physical=(max(lower, min(default, 0.0)), min(upper, 1e3)))
+
+
+@pytest.mark.parametrize(("param", "lo", "hi", "expected"), [
+    # a role without a range, unbounded: [0, 1], linear, margins 0.04
+    (_param("offset"), -INF, INF, [0.04, 0.27, 0.5, 0.73, 0.96]),
+    # roughness, unbounded: its role's range [1e-3, 1], log: 10^(-3 + 3 * (0.04, 0.5, 0.96))
+    (_param("roughness", default=0.1), -INF, INF, [10 ** -2.88, 10 ** -1.5, 10 ** -0.12]),
+    # an exponent bounded below only: from the bound to the role's upper end 1e4, log
+    (_param("exponent", lower=1.0, default=10.0), 1.0, INF, [10 ** 0.16, 100.0, 10 ** 3.84]),
+    # the lower bound above the role's range: a factor 100 above it, log: 2 x 10^(2 x (0.04, 0.5, 0.96))
+    (_param("roughness", lower=0.0, default=0.1), 2.0, INF, [2 * 10 ** 0.08, 20.0, 2 * 10 ** 1.92]),
+    # bounded both sides, a ratio under 100: linear inside the bounds
+    (_param("shape", lower=0.0, upper=1.0), 0.2, 0.7, [0.22, 0.45, 0.68]),
+    # unbounded below, bounded above under the role's lower end: the single value at the bound
+    (_param("anisotropy", default=-6.0, upper=-5.0), -INF, -5.0, [-5.0]),
+])
+def test_the_axis_of_one_parameter(param, lo, hi, expected):
+    np.testing.assert_allclose(_axis(param, lo, hi, len(expected) if len(expected) > 1 else 4), expected, rtol=1e-12)
