@@ -1,0 +1,50 @@
+"""The disk cache's key, in process: a kept program is found again only by the same model (name,
+channels, parameters), program name and shapes; a user's own formula is never kept. (The
+cross-process behaviour is tests/test_program_cache.py, in subprocesses.)"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import pytest
+
+from brdffit import models
+from brdffit.fitting import cache
+
+
+@pytest.fixture
+def folder(monkeypatch, tmp_path):
+    monkeypatch.setitem(cache._STATE, "dir", tmp_path)  # as enable() sets it, without JAX's global config
+    return tmp_path / "brdffit-programs"
+
+
+def _program(factor):
+    return lambda: (lambda x: x * factor)
+
+
+X = (jnp.arange(3.0),)
+
+
+def test_a_program_is_found_again_by_its_model_and_never_by_another(folder):
+    phong, blinn = models.get("phong"), models.get("blinn_phong")  # the same parameters and shapes
+    assert phong.param_names == blinn.param_names
+    assert cache.load_or_compile(("t", phong), _program(2.0), X)(*X).tolist() == [0.0, 2.0, 4.0]
+    assert cache.load_or_compile(("t", blinn), _program(3.0), X)(*X).tolist() == [0.0, 3.0, 6.0]
+    assert len(list(folder.glob("*.bin"))) == 2
+    # found again on disk (the build is not used): each model gets its own program back
+    assert cache.load_or_compile(("t", blinn), _program(5.0), X)(*X).tolist() == [0.0, 3.0, 6.0]
+    assert cache.load_or_compile(("t", phong), _program(5.0), X)(*X).tolist() == [0.0, 2.0, 4.0]
+    # another channel count, program name or shape is another program
+    assert cache.load_or_compile(("t", phong.with_channels(1)), _program(7.0), X)(*X).tolist() == [0.0, 7.0, 14.0]
+    assert cache.load_or_compile(("u", phong), _program(11.0), X)(*X).tolist() == [0.0, 11.0, 22.0]
+    y = (jnp.arange(2.0),)
+    assert cache.load_or_compile(("t", phong), _program(13.0), y)(*y).tolist() == [0.0, 13.0]
+    assert len(list(folder.glob("*.bin"))) == 5
+
+
+def test_a_users_formula_or_an_unknown_key_part_is_compiled_every_time(folder):
+    phong = models.get("phong")
+    own = models.Model("mine", phong.params, lambda p, wi, wo: phong.formula(p, wi, wo), citation="")
+    assert cache.load_or_compile(("t", own), _program(2.0), X)(*X).tolist() == [0.0, 2.0, 4.0]
+    assert cache.load_or_compile(("t", own), _program(3.0), X)(*X).tolist() == [0.0, 3.0, 6.0]
+    assert cache.load_or_compile(("t", object()), _program(4.0), X)(*X).tolist() == [0.0, 4.0, 8.0]
+    assert not folder.exists() or not list(folder.glob("*.bin"))
