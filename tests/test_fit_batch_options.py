@@ -70,3 +70,36 @@ def test_each_fits_metrics_and_gauss_newton_matrix_come_from_the_batch_program(t
             np.testing.assert_allclose(r.stderr[name], single.stderr[name], rtol=2e-3, err_msg=name)
         for key, value in single.metrics.items():
             assert r.metrics[key] == pytest.approx(value, rel=2e-3, abs=1e-12), key
+
+
+SHARDED = """
+import json, sys
+import jax
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from test_fit_core import TRUE, _measurement
+import brdffit
+ms = [_measurement({**TRUE, "alpha": [a]}, n=200, noise=0.01, seed=i) for i, a in enumerate((0.2, 0.3, 0.25, 0.15))]
+rs = brdffit.fit_batch(ms, "ggx", chunk=2)
+print(json.dumps({"devices": len(jax.local_devices()), "alpha": [float(r.params["alpha"][0]) for r in rs],
+                  "converged": [r.converged for r in rs]}))
+"""
+
+
+def test_the_batch_axis_is_sharded_over_several_devices_with_the_same_results():
+    """Two CPU devices (XLA's host device count): chunks of two fits are split over them."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", BRDFFIT_CACHE="off")
+    run = subprocess.run([sys.executable, "-c", SHARDED, str(Path(__file__).parent)], capture_output=True,
+                         text=True, timeout=600, env=env)
+    assert run.returncode == 0, run.stderr[-3000:]
+    got = json.loads(run.stdout.strip().splitlines()[-1])
+    assert got["devices"] == 2 and all(got["converged"]), got
+    ms = [_measurement({**TRUE, "alpha": [a]}, n=200, noise=0.01, seed=i) for i, a in enumerate((0.2, 0.3, 0.25, 0.15))]
+    single = [float(r.params["alpha"][0]) for r in fit_batch(ms, "ggx", chunk=2)]
+    np.testing.assert_allclose(got["alpha"], single, rtol=1e-6)
