@@ -4,7 +4,7 @@ Why: mutmut 3 runs, for each mutant, only the tests during which the mutated fun
 stats pass. Code that runs at import time (e.g. ``lafortune.lobe_params`` building a parameter
 table) runs during the collection of the first test module, so mutmut credits it to one or two
 tests and never tries the tests that check that table. Here each survivor gets a fresh interpreter
-with the mutant active from the first import, and the package's test files (below) run.
+with the mutant active from the first import, and the package's test files run, with its module's (below: tests mutmut leaves out, e.g. subprocesses).
 
 Mutants that ran past mutmut's CPU-time limit are rechecked too (with a wall-clock limit,
 RECHECK_TIMEOUT seconds, default 900: a fresh process compiles its JAX programs anew, which can
@@ -36,13 +36,26 @@ TESTS_BY_PACKAGE = {
     "brdffit.io": ["tests/test_io_*.py", "tests/test_malformed.py"],
     "brdffit.fitting": ["tests/test_fit_core.py", "tests/test_fit_status.py", "tests/test_parameter_space.py"],
 }
+# Modules whose tests mutmut's configuration leaves out (they run the CLI, render, or start
+# subprocesses) or that have their own files: these are added to the package's.
+TESTS_BY_MODULE = {
+    "brdffit.fitting.batch": ["tests/test_fit_batch_options.py"],
+    "brdffit.fitting.cache": ["tests/test_program_cache_keys.py", "tests/test_program_cache.py"],
+    "brdffit.fitting.compare": ["tests/test_surfaces.py"],
+    "brdffit.fitting.fitfile": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_reliability.py"],
+    "brdffit.fitting.init": ["tests/test_init_axis.py", "tests/test_multistart.py", "tests/test_solver.py"],
+    "brdffit.fitting.program": ["tests/test_program_cache.py", "tests/test_solver.py"],
+    "brdffit.fitting.result": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_surfaces.py"],
+    "brdffit.fitting.solve": ["tests/test_solver.py", "tests/test_multistart.py"],
+}
 RECHECK = Path("mutants/recheck.json")
 
 
 def test_files(name: str) -> list[str]:
     pkg = ".".join(name.split(".")[:2])
+    module = name.rsplit(".", 1)[0]
     files = []
-    for pattern in TESTS_BY_PACKAGE[pkg]:
+    for pattern in TESTS_BY_MODULE.get(module, []) + TESTS_BY_PACKAGE[pkg]:
         files += sorted(str(p) for p in Path("mutants").glob(pattern))
     return [f.removeprefix("mutants/") for f in files]
 
@@ -55,20 +68,20 @@ def main(argv: list[str]) -> int:
     todo = [n for n, s in load_results(Path(".")).items()
             if s in (SURVIVED, TIMEOUT, NO_TESTS) and done.get(n) not in (KILLED, TIMEOUT)
             and any(fnmatch.fnmatch(n, g) for g in globs)]
-    clean_packages = set()
+    clean_runs = set()
     for name in todo:
-        pkg = ".".join(name.split(".")[:2])
-        if pkg not in clean_packages:  # a test failing without any mutant would "kill" every one
-            clean = _pytest("", only or test_files(name))
+        files = only or test_files(name)
+        if tuple(files) not in clean_runs:  # a test failing without any mutant would "kill" every one
+            clean = _pytest("", files)
             if clean is None:
-                print(f"the {pkg} tests ran past RECHECK_TIMEOUT without a mutant; nothing rechecked "
-                      "(raise RECHECK_TIMEOUT or name fewer test files)", file=sys.stderr)
+                print(f"the tests {' '.join(files)} ran past RECHECK_TIMEOUT without a mutant; nothing "
+                      "rechecked (raise RECHECK_TIMEOUT or name fewer test files)", file=sys.stderr)
                 return 1
             if clean.returncode != 0:
-                print(f"the {pkg} tests fail without a mutant; nothing rechecked", file=sys.stderr)
+                print(f"the tests {' '.join(files)} fail without a mutant; nothing rechecked", file=sys.stderr)
                 return 1
-            clean_packages.add(pkg)
-        r = _pytest(name, only or test_files(name))
+            clean_runs.add(tuple(files))
+        r = _pytest(name, files)
         done[name] = TIMEOUT if r is None else KILLED if _detected(r) else SURVIVED
         print(f"{done[name]:<9} {name}", flush=True)
         RECHECK.write_text(json.dumps(done, indent=1))

@@ -63,3 +63,13 @@ def test_a_mutant_sample_is_seeded_uniform_per_package_and_any_prefix_covers_eve
     # uniform: over many seeds every fitting mutant is drawn about 30/300 of the time
     counts = Counter(s for seed in range(400) for s in draw(names, 30, seed) if ".fitting." in s)
     assert len(counts) == 300 and 20 <= min(counts.values()) and max(counts.values()) <= 65
+
+
+def test_the_rechecks_test_files_and_modules_exist(monkeypatch):
+    """A misspelt name in the recheck's maps would silently recheck a survivor against nothing."""
+    monkeypatch.syspath_prepend(str(REPO / "scripts"))
+    from mutation_recheck import TESTS_BY_MODULE, TESTS_BY_PACKAGE
+    for key, patterns in {**TESTS_BY_PACKAGE, **TESTS_BY_MODULE}.items():
+        assert (REPO / key.replace(".", "/")).with_suffix(".py").exists() or (REPO / key.replace(".", "/")).is_dir(), key
+        for pattern in patterns:
+            assert list(REPO.glob(pattern)), (key, pattern)
