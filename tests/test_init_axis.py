@@ -36,3 +36,30 @@ def _param(role, lower=-INF, upper=INF, default=0.5):
 ])
 def test_the_axis_of_one_parameter(param, lo, hi, expected):
     np.testing.assert_allclose(_axis(param, lo, hi, len(expected) if len(expected) > 1 else 4), expected, rtol=1e-12)
+
+
+def test_box_least_squares_matches_scipy_and_survives_a_column_the_data_do_not_see():
+    """The linear unknowns at a grid point: min |A x - y|^2 on a box, as the init poses it (the
+    Gram matrix of unit columns). Reference: scipy.optimize.lsq_linear. A zero column (a linear
+    parameter no used sample depends on) gave NaN for every unknown (0 / 0 spread through G x)."""
+    import jax.numpy as jnp
+    from scipy.optimize import lsq_linear
+
+    from brdffit.fitting.init import _box_lsq
+
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((40, 4))
+    A /= np.linalg.norm(A, axis=0)
+    y = rng.standard_normal(40)
+    lo, hi = np.array([0.0, 0.0, -0.2, 0.0]), np.array([1.0, 0.1, 0.2, 5.0])
+    expected = lsq_linear(A, y, bounds=(lo, hi), tol=1e-12, method="bvls").x
+    assert np.sum((expected <= lo + 1e-12) | (expected >= hi - 1e-12)) >= 1  # the box matters here
+
+    def solve(A, lo, hi):
+        return np.asarray(_box_lsq(jnp.asarray(A.T @ A), jnp.asarray(A.T @ y), jnp.asarray(lo), jnp.asarray(hi),
+                                   sweeps=40))
+
+    np.testing.assert_allclose(solve(A, lo, hi), expected, atol=1e-9)
+    with_zero = solve(np.column_stack([A, np.zeros(40)]), np.append(lo, 0.0), np.append(hi, 1.0))
+    assert np.all(np.isfinite(with_zero)), with_zero
+    np.testing.assert_allclose(with_zero[:4], expected, atol=1e-9)

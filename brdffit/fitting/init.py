@@ -128,8 +128,9 @@ def grid_for(model: Model, lo, hi, free, anchor) -> np.ndarray:
 
 
 def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
-    """min 0.5 x'Gx - b'x on lo <= x <= hi (G small, PSD, unit diagonal): the unconstrained
-    solution clipped, then projected coordinate descent."""
+    """min 0.5 x'Gx - b'x on lo <= x <= hi (G small, PSD, unit diagonal, or a zero row and column
+    where a column of the data is zero): the unconstrained solution clipped, then projected
+    coordinate descent."""
     n = rhs.shape[0]
     ridge = 1e-9 * jnp.eye(n, dtype=gram.dtype)
     x = spd_solve(gram + ridge, rhs)
@@ -137,8 +138,11 @@ def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
     x = jnp.clip(x, lo, hi)
     for _ in range(sweeps):
         for j in range(n):  # n is small and static: unrolled
-            g = rhs[j] - gram[j] @ x + gram[j, j] * x[j]
-            x = x.at[j].set(jnp.clip(g / gram[j, j], lo[j], hi[j]))
+            d = gram[j, j]
+            g = rhs[j] - gram[j] @ x + d * x[j]
+            # A column the data do not see (d = 0: the parameter changes no used sample) has no say:
+            # it keeps its value; 0 / 0 would make it NaN, and through gram[k] @ x every other one.
+            x = x.at[j].set(jnp.where(d > 0, jnp.clip(g / jnp.where(d > 0, d, 1.0), lo[j], hi[j]), x[j]))
     return x
 
 
