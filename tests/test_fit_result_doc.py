@@ -141,3 +141,30 @@ def test_recorded_per_channel_bounds_stay_lists_and_single_ones_scalars():
     rb = _recorded_bounds({"kd": [[0, 0, 0], [1, 1, 1]], "alpha": [0.01, 0.5], "f0": [[0.1], [0.9]]}, "f")
     assert rb == {"kd": ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), "alpha": (0.01, 0.5), "f0": (0.1, 0.9)}
     assert np.asarray(rb["f0"][0]).ndim == 0
+
+
+def test_eval_takes_one_pair_or_many_and_broadcasts_one_against_many():
+    r = FitResult.from_dict(FULL)
+    m = models.get("ggx")
+    wi = np.array([[0.0, 0.6, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 1.0]])
+    wo = np.array([[0.0, -0.6, 0.8], [0.0, 0.0, 1.0], [0.28, 0.0, 0.96]])
+    full = np.asarray(m.eval(m.check_params(FULL["params"]), wi, wo))
+    np.testing.assert_allclose(r.eval(wi, wo), full, rtol=1e-12)
+    one = r.eval(wi[1], wo[1])
+    assert one.shape == (3,)
+    np.testing.assert_allclose(one, full[1], rtol=1e-12)
+    against = r.eval(wi[2], wo)  # one light against three views
+    assert against.shape == (3, 3)
+    np.testing.assert_allclose(against, np.asarray(m.eval(m.check_params(FULL["params"]), np.tile(wi[2], (3, 1)), wo)),
+                               rtol=1e-12)
+    assert r.eval(wi, wo[0]).shape == (3, 3)
+    assert r.eval(np.array([0.0, 0.6, -0.8]), wo[0]).tolist() == [0.0, 0.0, 0.0]  # below the horizon
+
+
+def test_an_unknown_model_name_is_one_usage_line_without_quotes_around_it():
+    from brdffit.errors import UsageError
+    from brdffit.fitting.problem import resolve_model
+
+    with pytest.raises(UsageError) as info:
+        resolve_model("gxx", 3)
+    assert str(info.value).startswith("unknown model 'gxx'"), str(info.value)
