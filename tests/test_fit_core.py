@@ -240,3 +240,31 @@ def test_fit_batch_matches_single_fits():
         assert r.converged, r.status
         np.testing.assert_allclose(r.params["alpha"], single.params["alpha"], rtol=1e-3)
         np.testing.assert_allclose(r.params["alpha"], a, rtol=0.02)
+
+
+def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
+    """seconds: compile and run of the grid start plus those of each scipy solve (time shifted by
+    known amounts here, so that the sums cannot hold by chance of zero compile times)."""
+    from brdffit.fitting import api, solve
+
+    seen = {"init": [], "solve": []}
+    real_starts, real_solve = api._init.best_starts, solve.solve_scipy
+
+    def best_starts(*a, **kw):
+        starts, losses, c_s, r_s = real_starts(*a, **kw)
+        seen["init"].append((c_s + 1.0, r_s + 2.0))
+        return starts, losses, c_s + 1.0, r_s + 2.0
+
+    def solve_scipy(*a, **kw):
+        *out, c_s, r_s = real_solve(*a, **kw)
+        seen["solve"].append((c_s + 10.0, r_s + 100.0))
+        return (*out, c_s + 10.0, r_s + 100.0)
+
+    monkeypatch.setattr(api._init, "best_starts", best_starts)
+    monkeypatch.setattr(solve, "solve_scipy", solve_scipy)
+    r = fit(_measurement(n=200), "ggx", solver="scipy", multistart=2)
+    assert len(seen["init"]) == 1 and len(seen["solve"]) == 3
+    (c_init, r_init), = seen["init"]
+    assert r.seconds["init"] == pytest.approx(c_init + r_init)
+    assert r.seconds["compile"] == pytest.approx(c_init + sum(c for c, _ in seen["solve"]))
+    assert r.seconds["run"] == pytest.approx(r_init + sum(t for _, t in seen["solve"]))
