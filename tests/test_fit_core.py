@@ -268,3 +268,20 @@ def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     assert r.seconds["init"] == pytest.approx(c_init + r_init)
     assert r.seconds["compile"] == pytest.approx(c_init + sum(c for c, _ in seen["solve"]))
     assert r.seconds["run"] == pytest.approx(r_init + sum(t for _, t in seen["solve"]))
+
+
+def test_lm_fits_take_the_structured_normal_equations(monkeypatch):
+    """The bounded LM of a fit gets its model's structured J^T J (brdffit.fitting.structure), never
+    the generic forward-mode Jacobian of every entry (equal numbers, several times the cost:
+    PERFORMANCE-NOTES). An rtol of its own makes the fit program new, and the disk cache is off
+    for it, so it is traced here."""
+    from brdffit.fitting import cache, solve
+
+    monkeypatch.setitem(cache._STATE, "dir", None)
+
+    def generic(*args):
+        raise AssertionError("the generic forward-mode normal equations were traced")
+
+    monkeypatch.setattr(solve, "_normal_equations", generic)
+    r = fit(_measurement(n=200), "ggx", rtol=1.2345e-7)
+    assert r.converged, r.status
