@@ -246,6 +246,10 @@ def test_composite_lobes_come_out_ordered():
 
 def test_narrow_lobe_and_undetermined_parameter_warnings():
     assert math.degrees(sample_spacing(ubo_directions())) == pytest.approx(14.49, abs=0.01)
+    # the cache keys it by the bytes: float32 or a list of the same directions is the same set
+    assert math.degrees(sample_spacing(ubo_directions().astype(np.float32))) == pytest.approx(14.49, abs=0.01)
+    assert math.degrees(sample_spacing(ubo_directions()[:200].tolist())) == pytest.approx(
+        math.degrees(sample_spacing(ubo_directions()[:200])), rel=1e-12)
     r = fit(_ubo("ggx", dict(GLOSSY, alpha=[0.03], ks=[0.5] * 3), "sharp"), "ggx")
     assert any("narrower than the sample spacing" in w for w in r.warnings), r.warnings
     # The sentence for a parameter without a standard error that is not on a bound:
