@@ -415,3 +415,19 @@ def test_fold_reflects_into_the_bounds_by_hand():
     lo = np.array([0.0, 0.0, 0.0, 1.0, -inf, -inf])
     hi = np.array([1.0, 1.0, 1.0, inf, 2.0, inf])
     np.testing.assert_array_equal(np.abs(np.asarray(slope(jnp.asarray(at), jnp.asarray(lo), jnp.asarray(hi)))), 1.0)
+
+
+def test_bounds_alone_or_fixed_alone_narrow_the_space_and_none_gives_the_models_own():
+    from brdffit.fitting.api import parameter_space
+
+    ggx = models.get("ggx")
+    alpha = dict(ggx.slices())["alpha"].start
+    narrowed = parameter_space(ggx, bounds={"alpha": (0.3, 0.5)})
+    assert (narrowed.lo[alpha], narrowed.hi[alpha]) == (0.3, 0.5) and narrowed.free.all()
+    held = parameter_space(ggx, fixed={"alpha": 0.2})
+    assert not held.free[alpha] and held.values[alpha] == 0.2 and held.free.sum() == ggx.n_free - 1
+    own = parameter_space(ggx)
+    lo, hi = ggx.bounds()
+    np.testing.assert_array_equal(own.lo, lo)
+    np.testing.assert_array_equal(own.hi, hi)
+    assert own.free.all() and parameter_space(ggx) is own  # built once per model
