@@ -44,6 +44,7 @@ TESTS_BY_MODULE = {
     "brdffit.fitting.compare": ["tests/test_surfaces.py"],
     "brdffit.fitting.fitfile": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_reliability.py"],
     "brdffit.fitting.init": ["tests/test_init_axis.py", "tests/test_multistart.py", "tests/test_solver.py"],
+    "brdffit.fitting.problem": ["tests/test_fit_result_doc.py", "tests/test_prepare_*.py"],
     "brdffit.fitting.program": ["tests/test_program_cache.py", "tests/test_solver.py"],
     "brdffit.fitting.result": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_surfaces.py"],
     "brdffit.fitting.solve": ["tests/test_solver.py", "tests/test_multistart.py"],
