@@ -41,7 +41,7 @@ TESTS_BY_PACKAGE = {
 TESTS_BY_MODULE = {
     "brdffit.fitting.batch": ["tests/test_fit_batch_options.py"],
     "brdffit.fitting.cache": ["tests/test_program_cache_keys.py", "tests/test_program_cache.py"],
-    "brdffit.fitting.compare": ["tests/test_surfaces.py"],
+    "brdffit.fitting.compare": ["tests/test_compare_report.py", "tests/test_surfaces.py"],
     "brdffit.fitting.fitfile": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_reliability.py"],
     "brdffit.fitting.init": ["tests/test_init_axis.py", "tests/test_multistart.py", "tests/test_solver.py"],
     "brdffit.fitting.problem": ["tests/test_fit_result_doc.py", "tests/test_prepare_*.py"],

@@ -211,6 +211,12 @@ def test_compare_report_and_select(tmp_path):
     assert [(r["model"], r["loss"], r["solver"]) for r in rep.rows] == [
         (name, x, s) for name in ("lambert", "ggx") for x in ("log", "l2") for s in ("lm", "scipy")]
     assert [r.loss for r in rep.results] == [r["loss"] for r in rep.rows]
+    from brdffit.fitting.compare import COLUMNS
+    for row, r in zip(rep.rows, rep.results):
+        assert set(row) == set(COLUMNS), set(row) ^ set(COLUMNS)
+        assert (row["compile_s"], row["run_s"], row["steps"]) == (r.seconds["compile"], r.seconds["run"], r.steps)
+        for key in ("rmse", "log_rmse", "rel_rmse"):
+            assert row[key] == pytest.approx(r.metrics[key], rel=1e-9), key
     for s in ("lm", "scipy"):
         by_loss = {r["loss"]: r for r in rep.rows if r["model"] == "ggx" and r["solver"] == s}
         assert by_loss["l2"]["loss_l2"] <= by_loss["log"]["loss_l2"] * (1 + 1e-9)

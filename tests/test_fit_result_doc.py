@@ -168,3 +168,9 @@ def test_an_unknown_model_name_is_one_usage_line_without_quotes_around_it():
     with pytest.raises(UsageError) as info:
         resolve_model("gxx", 3)
     assert str(info.value).startswith("unknown model 'gxx'"), str(info.value)
+
+
+def test_a_folder_is_refused_as_a_fit_file_naming_it(tmp_path):
+    with pytest.raises(InputError) as info:
+        FitResult.from_json(tmp_path)
+    assert (info.value.path, info.value.problem) == (str(tmp_path), "is a folder, not a fit file (JSON)")

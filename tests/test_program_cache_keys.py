@@ -1,8 +1,11 @@
 """The disk cache's key, in process: a kept program is found again only by the same model (name,
 channels, parameters), program name and shapes; a user's own formula is never kept. (The
-cross-process behaviour is tests/test_program_cache.py, in subprocesses.)"""
+cross-process behaviour is tests/test_program_cache.py, in subprocesses.) And where the cache lives:
+BRDFFIT_CACHE (a folder, or off in any of its spellings), else the user's cache folder."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import jax.numpy as jnp
 import pytest
@@ -48,3 +51,20 @@ def test_a_users_formula_or_an_unknown_key_part_is_compiled_every_time(folder):
     assert cache.load_or_compile(("t", own), _program(3.0), X)(*X).tolist() == [0.0, 3.0, 6.0]
     assert cache.load_or_compile(("t", object()), _program(4.0), X)(*X).tolist() == [0.0, 4.0, 8.0]
     assert not folder.exists() or not list(folder.glob("*.bin"))
+
+
+@pytest.mark.parametrize("off", ["off", "OFF", " 0 ", "none", "false", "No"])
+def test_every_spelling_of_off_disables_the_cache(monkeypatch, off):
+    monkeypatch.setenv("BRDFFIT_CACHE", off)
+    assert cache.cache_dir() is None
+
+
+def test_the_cache_folder_is_the_setting_or_the_users_cache(monkeypatch, tmp_path):
+    import platformdirs
+
+    monkeypatch.setenv("BRDFFIT_CACHE", str(tmp_path / "c"))
+    assert cache.cache_dir() == tmp_path / "c"
+    monkeypatch.setenv("BRDFFIT_CACHE", "~/brdffit-cache")
+    assert str(cache.cache_dir()).startswith(str(Path.home()))
+    monkeypatch.delenv("BRDFFIT_CACHE")
+    assert cache.cache_dir() == Path(platformdirs.user_cache_dir("brdffit")) / "jax"

@@ -1,0 +1,39 @@
+"""brdffit.compare's Report without fitting: the JSON file, the Jupyter table's ranking, and the
+Pareto front's ties (SPEC 5: "Rows whose errors tie within rtol keep only the fastest")."""
+
+from __future__ import annotations
+
+import json
+
+from brdffit.fitting.compare import Report
+
+
+def _row(model, solver, loss_log, run_s):
+    return {"model": model, "solver": solver, "loss": "log", "n_params": 2, "loss_log": loss_log,
+            "log_rmse": loss_log, "run_s": run_s, "compile_s": 0.5, "steps": 3, "converged": True}
+
+
+ROWS = (_row("ggx", "lm", 0.02, 1.0), _row("lambert", "lm", 0.5, 0.1), _row("ward", "bfgs", 0.01, 3.0))
+
+
+def test_to_json_writes_what_it_returns_with_a_final_newline(tmp_path):
+    rep = Report(ROWS, "felt")
+    text = rep.to_json(tmp_path / "r.json")
+    assert (tmp_path / "r.json").read_text() == text + "\n"
+    assert json.loads(text) == {"data_name": "felt", "rows": [dict(r) for r in ROWS]}
+
+
+def test_the_jupyter_table_ranks_rows_by_log_loss():
+    html = Report(ROWS, "felt")._repr_html_()
+    assert "<p><b>felt</b>: 3 fits, ranked by log loss</p>" in html
+    assert html.index("<td>ward</td>") < html.index("<td>ggx</td>") < html.index("<td>lambert</td>")
+
+
+def test_exact_ties_keep_the_first_of_equally_fast_rows_even_without_tolerance():
+    rows = (_row("ggx", "lm", 0.02, 1.0), _row("ggx", "lmb", 0.02, 1.0), _row("ggx", "dogleg", 0.03, 0.5))
+    front = Report(rows).pareto(rtol=0.0)
+    assert [r["solver"] for r in front] == ["dogleg", "lm"]
+    # a lower error by less than rtol is a tie: the faster row stays, alone
+    near = (_row("ggx", "lm", 0.02 * (1 - 1e-8), 2.0), _row("ggx", "lmb", 0.02, 1.0))
+    assert [r["solver"] for r in Report(near).pareto()] == ["lmb"]
+    assert [r["solver"] for r in Report(near).pareto(rtol=0.0)] == ["lmb", "lm"]
