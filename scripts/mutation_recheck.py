@@ -48,6 +48,7 @@ TESTS_BY_MODULE = {
     "brdffit.fitting.program": ["tests/test_program_cache.py", "tests/test_solver.py"],
     "brdffit.fitting.result": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_surfaces.py"],
     "brdffit.fitting.solve": ["tests/test_solver.py", "tests/test_multistart.py"],
+    "brdffit.fitting.structure": ["tests/test_structure.py"],
 }
 RECHECK = Path("mutants/recheck.json")
 

@@ -291,3 +291,13 @@ def test_lm_fits_take_the_structured_normal_equations(monkeypatch):
     monkeypatch.setattr(solve, "_normal_equations", generic)
     r = fit(_measurement(n=200), "ggx", rtol=1.2345e-7)
     assert r.converged, r.status
+
+
+def test_a_fits_compile_and_run_seconds_lie_within_its_wall_time():
+    import time
+
+    t0 = time.perf_counter()
+    r = fit(_measurement(n=200), "lambert", loss="l2")
+    wall = time.perf_counter() - t0
+    assert 0.0 < r.seconds["run"] and 0.0 <= r.seconds["compile"]
+    assert r.seconds["compile"] + r.seconds["run"] <= wall, (r.seconds, wall)
