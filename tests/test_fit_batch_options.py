@@ -103,3 +103,18 @@ def test_the_batch_axis_is_sharded_over_several_devices_with_the_same_results():
     ms = [_measurement({**TRUE, "alpha": [a]}, n=200, noise=0.01, seed=i) for i, a in enumerate((0.2, 0.3, 0.25, 0.15))]
     single = [float(r.params["alpha"][0]) for r in fit_batch(ms, "ggx", chunk=2)]
     np.testing.assert_allclose(got["alpha"], single, rtol=1e-6)
+
+
+def test_lobes_of_one_kind_come_out_narrowest_first_in_a_batch():
+    truth = {"kd": [0.2, 0.2, 0.2], "ggx1.ks": [0.3, 0.3, 0.3], "ggx1.alpha": [0.08], "ggx1.f0": [0.5],
+             "ggx2.ks": [0.2, 0.2, 0.2], "ggx2.alpha": [0.4], "ggx2.f0": [0.5]}
+    ms = [_measurement(truth, model="lambert+ggx+ggx", n=300, seed=s) for s in (0, 1)]
+    for r in fit_batch(ms, "lambert+ggx+ggx", max_steps=30):
+        assert r.params["ggx1.alpha"][0] <= r.params["ggx2.alpha"][0], r.params
+    # started with the lobes the other way round, the solve ends there; the result is reordered
+    swapped = {**truth, "ggx1.ks": truth["ggx2.ks"], "ggx1.alpha": [0.4], "ggx2.ks": truth["ggx1.ks"],
+               "ggx2.alpha": [0.08]}
+    for r in fit_batch(ms, "lambert+ggx+ggx", starts=[swapped, swapped], grid=False, max_steps=30):
+        assert r.params["ggx1.alpha"][0] == pytest.approx(0.08, rel=0.05), r.params
+        np.testing.assert_allclose(r.params["ggx1.ks"], truth["ggx1.ks"], rtol=0.05)
+        assert r.params["ggx2.alpha"][0] == pytest.approx(0.4, rel=0.05), r.params

@@ -301,3 +301,21 @@ def test_a_fits_compile_and_run_seconds_lie_within_its_wall_time():
     wall = time.perf_counter() - t0
     assert 0.0 < r.seconds["run"] and 0.0 <= r.seconds["compile"]
     assert r.seconds["compile"] + r.seconds["run"] <= wall, (r.seconds, wall)
+
+
+def test_progress_hears_every_phase_and_compiling_only_when_it_compiles():
+    notes = []
+    m = _measurement(n=200)
+    fit(m, "lambert", rtol=2.3456e-7, progress=notes.append)  # an rtol of its own: a new program
+    assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "solved"], notes
+    assert notes[2].startswith("compiling: fit (")
+    again = []
+    fit(m, "lambert", rtol=2.3456e-7, progress=again.append)
+    assert [n.split(":")[0] for n in again] == ["initialising", "solving", "solved"], again
+
+
+def test_an_unknown_solver_name_is_named_by_make_solver():
+    from brdffit.fitting.solve import make_solver
+
+    with pytest.raises(ValueError, match="^newton$"):
+        make_solver("newton", 1e-8, 0.0)
