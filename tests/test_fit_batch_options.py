@@ -23,6 +23,7 @@ def test_given_starts_without_the_grid_are_where_each_fit_starts(two):
     rs = fit_batch(two, "ggx", starts=starts, grid=False, max_steps=3)
     for r, s in zip(rs, starts):
         assert r.options["init"] == "given"
+        assert set(r.seconds) == {"compile", "run", "init"} and r.seconds["init"] == 0.0  # as fit's
         for name, value in s.items():
             np.testing.assert_allclose(r.start[name], value, rtol=1e-12, err_msg=name)
     # flat vectors (the model's free-parameter order) are the same starts
