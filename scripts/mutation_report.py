@@ -44,14 +44,20 @@ STATUS = {1: KILLED, 3: KILLED, 37: KILLED, 0: SURVIVED, 5: NO_TESTS, 33: NO_TES
           -24: TIMEOUT, 152: TIMEOUT, 255: TIMEOUT, None: UNCHECKED}
 
 
-def load_results(root: Path) -> dict[str, str]:
+def mutated_sources(root: Path):
+    """A test ``source -> bool``: whether ``[tool.mutmut]`` (only_mutate, do_not_mutate) mutates
+    the source file at that path, relative to ``root``."""
     cfg = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["mutmut"]
+    return lambda source: any(fnmatch.fnmatch(source, p) for p in cfg.get("only_mutate", ["*"])) and not any(
+        fnmatch.fnmatch(source, p) for p in cfg.get("do_not_mutate", []))
+
+
+def load_results(root: Path) -> dict[str, str]:
+    is_mutated = mutated_sources(root)
     results = {}
     for meta in sorted((root / "mutants").rglob("*.py.meta")):
         source = str(meta.relative_to(root / "mutants")).removesuffix(".meta")
-        if not any(fnmatch.fnmatch(source, p) for p in cfg.get("only_mutate", ["*"])) or any(
-            fnmatch.fnmatch(source, p) for p in cfg.get("do_not_mutate", [])
-        ):
+        if not is_mutated(source):
             continue  # left over from a run before the configuration excluded the file
         for name, code in _read_json(meta)["exit_code_by_key"].items():
             results[name] = STATUS.get(code, "suspicious")

@@ -21,7 +21,6 @@ import argparse
 import fnmatch
 import random
 import sys
-import tomllib
 from collections import defaultdict
 from pathlib import Path
 
@@ -31,13 +30,13 @@ def mutant_names(root: Path) -> list[str]:
     from mutmut.mutation.file_mutation import mutate_file_contents
     from mutmut.utils.format_utils import get_mutant_name
 
-    cfg = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["mutmut"]
+    from mutation_report import mutated_sources
+
+    is_mutated = mutated_sources(root)
     names = []
     for path in sorted(root.glob("brdffit/**/*.py")):
         source = str(path.relative_to(root))
-        if not any(fnmatch.fnmatch(source, p) for p in cfg.get("only_mutate", ["*"])) or any(
-            fnmatch.fnmatch(source, p) for p in cfg.get("do_not_mutate", [])
-        ):
+        if not is_mutated(source):
             continue
         mutated = mutate_file_contents(source, path.read_text())
         names += [get_mutant_name(Path(source), name) for name in mutated.mutant_names]
