@@ -6,8 +6,8 @@ that changes nothing observable."""
 from __future__ import annotations
 
 import re
-from collections import Counter
 import tomllib
+from collections import Counter
 from pathlib import Path
 
 import pytest

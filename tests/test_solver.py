@@ -15,7 +15,6 @@ import pytest
 import brdffit
 from brdffit import models
 from brdffit.fitting import fit, init
-from brdffit.fitting.cache import cache_dir
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.fitting.program import run_fit, subset_rows
 from brdffit.fitting.solve import BoundedLevenbergMarquardt, from_box, make_solver, to_box
@@ -152,15 +151,6 @@ def test_grid_uses_a_declared_range_where_a_bound_is_infinite():
     hi[6] = np.inf  # alpha unbounded above: the grid stays in [alpha's lower bound, 1]
     g = init.grid_for(m, lo, hi, np.ones(m.n_free, bool), np.asarray(m.flatten(m.defaults())))
     assert np.all(np.isfinite(g)) and g[:, 0].max() <= 1.0 and g[:, 0].min() >= lo[6]
-
-
-def test_cache_folder_setting(monkeypatch, tmp_path):
-    monkeypatch.setenv("BRDFFIT_CACHE", "off")
-    assert cache_dir() is None
-    monkeypatch.setenv("BRDFFIT_CACHE", str(tmp_path / "c"))
-    assert cache_dir() == tmp_path / "c"
-    monkeypatch.delenv("BRDFFIT_CACHE")
-    assert cache_dir().name == "jax" and "brdffit" in str(cache_dir())
 
 
 def test_cli_and_api_reach_the_same_loss_on_a_composite(tmp_path):
