@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test bench clean mutation
+.PHONY: setup demo test bench clean mutation mutation-by-hand
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	PYTHON=$(PYTHON) bash scripts/setup.sh
@@ -42,6 +42,11 @@ mutation: $(STAMP)
 	nice -n 19 $(VENV)/bin/python scripts/mutation_recheck.py $(foreach p,$(MUTATE),"$(p)")
 	$(VENV)/bin/python scripts/mutation_report.py $(if $(SAMPLE),--sample mutants/sample.txt) \
 	    $(foreach p,$(MUTATE),"$(p)")
+
+# Issue 13's deliberate bugs (also outside models/fitting/io), each applied alone to a copy of the
+# tree: at least one named test must fail, without the shared data. Prints one line per bug.
+mutation-by-hand: $(STAMP)
+	$(VENV)/bin/python scripts/mutation_by_hand.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis mutants

@@ -73,3 +73,16 @@ def test_the_rechecks_test_files_and_modules_exist(monkeypatch):
         assert (REPO / key.replace(".", "/")).with_suffix(".py").exists() or (REPO / key.replace(".", "/")).is_dir(), key
         for pattern in patterns:
             assert list(REPO.glob(pattern)), (key, pattern)
+
+
+def test_the_hand_mutations_apply_to_the_current_source(monkeypatch):
+    """``make mutation-by-hand`` (scripts/mutation_by_hand.py) applies issue 13's mutations by text:
+    a source edit that moves one of them must show here, not as a silent 'does not apply' there."""
+    monkeypatch.syspath_prepend(str(REPO / "scripts"))
+    from mutation_by_hand import MUTATIONS
+
+    assert len(MUTATIONS) >= 10
+    for m in MUTATIONS:
+        source = (REPO / m.path).read_text()
+        assert source.count(m.old) == 1, (m.what, m.path)
+        assert m.new != m.old and m.tests and all((REPO / t).is_file() for t in m.tests), m.what
