@@ -41,12 +41,13 @@ def write_tensor_file(path: Path, fields: dict[str, np.ndarray]) -> Path:
 
 
 def isotropic_material(path: Path, rgb0, rgb1, n: int = 8, **replace: np.ndarray) -> Path:
-    """``replace``: fields written instead of the generated ones (to make a malformed material)."""
+    """``replace``: fields written instead of the generated ones, or left out where None (to make a
+    malformed material)."""
     f32 = np.float32
     rgb = np.empty((1, 2, 3, n, n), f32)
     rgb[0, 0] = np.asarray(rgb0, f32)[:, None, None]
     rgb[0, 1] = np.asarray(rgb1, f32)[:, None, None]
-    return write_tensor_file(path, {**{
+    fields = {**{
         "description": np.frombuffer(b"brdffit test material", np.uint8),
         "jacobian": np.array([0], np.uint8),
         "theta_i": np.array([0.0, np.pi / 2], f32),
@@ -57,4 +58,5 @@ def isotropic_material(path: Path, rgb0, rgb1, n: int = 8, **replace: np.ndarray
         "luminance": np.ones((1, 2, n, n), f32),
         "rgb": rgb,
         "valid": np.ones((n * n,), np.uint8),
-    }, **replace})
+    }, **replace}
+    return write_tensor_file(path, {name: a for name, a in fields.items() if a is not None})

@@ -100,3 +100,47 @@ def test_native_output_is_captured_and_restored(capfd):
 def test_query_directions_integers_become_float64():
     wi, wo, _ = _common.query_directions([[0, 0, 1]], [[0, 0, 1]])
     assert wi.dtype == np.float64 and wo.dtype == np.float64
+
+
+def _direction(theta_deg: float) -> list[float]:
+    t = np.radians(theta_deg)
+    return [float(np.sin(t)), 0.0, float(np.cos(t))]
+
+
+def test_summary_of_a_hand_made_table():
+    """What ``brdffit info`` prints, worked out by hand for five samples: two valid, one non-finite,
+    one with weight 0 and one with the light below the horizon (ranges over the valid ones only;
+    the angle ranges over all samples)."""
+    from brdffit.io import summary
+    from brdffit.measurement import Measurement
+
+    thetas = [(0, 30), (60, 0), (45, 75), (10, 20), (100, 80)]
+    m = Measurement(
+        [_direction(a) for a, _ in thetas], [_direction(b) for _, b in thetas],
+        [[0.5, -0.1, 2.0], [1.5, 0.0, 4.0], [np.nan, 0.0, 0.0], [9.0, 9.0, 9.0], [7.0, 7.0, 7.0]],
+        [1.0, 1.0, 1.0, 0.0, 1.0], name="five", source="five.npz", colour_space="linear_rec709", units="1/sr",
+        extra={"format": "npz"},
+    )
+    s = summary(m)
+    ranges = s.pop("ranges")
+    assert s.pop("theta_light_deg") == pytest.approx((0.0, 100.0))
+    assert s.pop("theta_view_deg") == pytest.approx((0.0, 80.0))
+    assert s == {"name": "five", "format": "npz", "source": "five.npz", "samples": 5, "grid": None, "channels": 3,
+                 "colour_space": "linear_rec709", "units": "1/sr", "invalid": 3, "zero_weight": 1, "non_finite": 1}
+    assert [r.pop("channel") for r in ranges] == ["R", "G", "B"]
+    assert ranges == [
+        pytest.approx({"min": 0.5, "max": 1.5, "mean": 1.0, "negative": 0}),
+        pytest.approx({"min": -0.1, "max": 0.0, "mean": -0.05, "negative": 1}),  # a zero is not negative
+        pytest.approx({"min": 2.0, "max": 4.0, "mean": 3.0, "negative": 0}),
+    ]
+
+
+def test_summary_without_valid_samples_or_format():
+    from brdffit.io import summary
+    from brdffit.measurement import Measurement
+
+    s = summary(Measurement([_direction(20)] * 2, [_direction(40)] * 2, [[1.0, 2.0], [3.0, 4.0]], [0.0, 0.0]))
+    assert s["format"] == "?" and s["channels"] == 2 and s["invalid"] == 2 and s["zero_weight"] == 2
+    assert [r["channel"] for r in s["ranges"]] == ["c0", "c1"]
+    for r in s["ranges"]:
+        assert np.isnan(r["min"]) and np.isnan(r["max"]) and np.isnan(r["mean"]) and r["negative"] == 0

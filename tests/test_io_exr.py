@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import brdffit
-from brdffit.errors import UsageError
+from brdffit.errors import InputError, UsageError
 from brdffit.grid import ubo_pairs
 from brdffit.io import exr
 
@@ -168,7 +168,7 @@ def test_existing_file_refused_without_force_replaced_with_force(tmp_path):
 
 def test_values_beyond_float32_are_written_silently_and_kept_exactly(tmp_path):
     """A value beyond float32's range becomes inf in the float32 channel (the float64 copy keeps it)
-    and writing warns about nothing: the cast overflows by design."""
+    and neither writing nor reading warns: the cast overflows by design."""
     import warnings
 
     import OpenEXR
@@ -181,4 +181,63 @@ def test_values_beyond_float32_are_written_silently_and_kept_exactly(tmp_path):
         exr.write(ubo(values), path)
     with OpenEXR.File(str(path), separate_channels=True) as f:
         assert np.isinf(f.channels()["G"].pixels.reshape(-1)[7])
-    assert brdffit.load(path).values[7, 1] == 1e39
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert brdffit.load(path).values[7, 1] == 1e39
+
+
+@pytest.mark.parametrize("names", [("R", "G", "B"), ("Y",), ("A", "B", "G", "R"), ("Y", "weight")])
+def test_a_table_written_by_another_tool_is_read_on_the_nominal_grid(tmp_path, names):
+    """Module docstring: any other 81 x 81 RGB (or Y) EXR is a UBO-81 table, rows light, columns view.
+    Written here with the OpenEXR library alone (no brdffit header): exactly R, G, B; Y alone; RGB
+    with alpha (not a colour channel); Y with a weight channel (used as the weights)."""
+    import OpenEXR
+
+    rng = np.random.default_rng(5)
+    px = {n: rng.uniform(0.0, 4.0, (81, 81)).astype(np.float32) for n in names}
+    path = tmp_path / "foreign.exr"
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, dict(px)).write(str(path))  # (it turns the dict's arrays into Channels)
+    m = brdffit.load(path)
+    colour = ["R", "G", "B"] if "R" in names else ["Y"]
+    want = np.stack([px[n].astype(np.float64).reshape(-1) for n in colour], axis=-1)
+    np.testing.assert_array_equal(np.asarray(m.values), want)
+    weights = px["weight"].astype(np.float64).reshape(-1) if "weight" in names else np.ones(6561)
+    np.testing.assert_array_equal(np.asarray(m.weights), weights)
+    gwi, gwo = ubo_pairs()
+    assert m.grid == "ubo81" and np.array_equal(np.asarray(m.wi), gwi) and np.array_equal(np.asarray(m.wo), gwo)
+
+
+def test_colour_channels():
+    assert exr.colour_channels(["B", "weight", "R", "G", "Y"]) == ("R", "G", "B")
+    assert exr.colour_channels({"R", "G", "Y"}) == ("Y",)
+    assert exr.colour_channels(["R", "G", "A"]) is None and exr.colour_channels([]) is None
+
+
+def test_read_refusals_in_full(tmp_path):
+    """Each file the EXR reader refuses, named with its whole message (no shared data)."""
+    import OpenEXR
+
+    def exr_file(name, px):
+        p = tmp_path / name
+        OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, px).write(str(p))
+        return p
+
+    good = brdffit.save(ubo(f32_exact_values(3)), tmp_path / "good.exr")
+    (tmp_path / "empty.exr").write_bytes(b"")
+    (tmp_path / "text.exr").write_bytes(b"81 81\n" * 10)
+    (tmp_path / "cut.exr").write_bytes(good.read_bytes()[:400])
+    cases = {
+        tmp_path / "empty.exr": "empty file (expected an OpenEXR image)",
+        tmp_path / "text.exr": "not an OpenEXR file (wrong magic number)",
+        exr_file("alpha.exr", {"A": np.ones((81, 81), np.float32)}): "no R,G,B or Y channels (has A)",
+        exr_file("small.exr", {"Y": np.ones((10, 20), np.float32)}):
+            "image is 20x10 pixels; a UBO-81 table is 81x81 (rows light, columns view)",
+    }
+    for path, problem in cases.items():
+        with pytest.raises(InputError) as err:
+            exr.read(path)
+        assert str(err.value) == f"{path}: {problem}"
+    with pytest.raises(InputError) as err:
+        exr.read(tmp_path / "cut.exr")
+    assert str(err.value).startswith(f"{tmp_path / 'cut.exr'}: unreadable OpenEXR (truncated or corrupt): ")
+    assert "\n" not in str(err.value)

@@ -27,9 +27,11 @@ def write_folder(root, kind="png", layout="flat", table=None, prefix="", skip=()
                 continue
             stem = prefix + direction_name(i, j)
             folder = root
-            if layout == "views":
+            if layout in ("views", "views-short"):
                 folder = root / stem[-11:]  # tvTTT_pvPPP
                 folder.mkdir(exist_ok=True)
+            if layout == "views-short":
+                stem = stem[:-12]  # [prefix_]tlTTT_plPPP: the view is the folder's
             if kind == "png":
                 Image.fromarray(np.tile(table[i, j], (size, size, 1))).save(folder / f"{stem}.png")
             else:
@@ -77,7 +79,7 @@ def test_linear_to_srgb_clips_to_code_range_and_encodes_in_float64():
     np.testing.assert_allclose(out, oetf(x32.astype(np.float64)), rtol=1e-12, atol=0)
 
 
-@pytest.mark.parametrize("layout", ["flat", "views"])
+@pytest.mark.parametrize("layout", ["flat", "views", "views-short"])
 def test_png_folder_colours(tmp_path, layout):
     table = codes(1)
     root = write_folder(tmp_path / "btf", "png", layout, table, prefix="mat_")
@@ -171,3 +173,62 @@ def test_option_errors(tmp_path):
     brdffit.save(brdffit.Measurement(wi=[[0, 0, 1.0]], wo=[[0, 0, 1.0]], values=[[1.0]]), p)
     with pytest.raises(UsageError, match="unexpected keyword"):
         brdffit.load(p, region=(0, 1, 0, 1))
+
+
+def test_short_name_off_the_grid_is_named(tmp_path):
+    root = write_folder(tmp_path / "s", "png", "views-short", codes(5))
+    bad = root / "tv000_pv000" / "tl015_pl010.png"
+    Image.fromarray(codes(5)[0, 0][None, None]).save(bad)
+    with pytest.raises(InputError) as err:
+        brdffit.load(root)
+    assert str(err.value) == f"{bad}: light direction tl015_pl010 is not on the UBO-81 grid"
+
+
+def test_incomplete_set_names_the_count_and_the_first_three_missing(tmp_path):
+    skip = {(0, 3), (2, 0), (2, 1), (40, 80), (80, 80)}
+    root = write_folder(tmp_path / "i", "png", "flat", codes(6), skip=skip)
+    with pytest.raises(InputError) as err:
+        brdffit.load(root)
+    first = ", ".join(direction_name(*k) for k in [(0, 3), (2, 0), (2, 1)])
+    assert str(err.value) == f"{root}: incomplete image set: 5 of 6561 UBO pairs missing, e.g. {first}"
+
+
+def test_region_selecting_no_texels_is_named(tmp_path):
+    root = write_folder(tmp_path / "e", "png", "flat", codes(7), size=4)
+    with pytest.raises(InputError) as err:
+        brdffit.load(root, region=(2, 2, 0, 4))
+    assert str(err.value).endswith(".png: region (2, 2, 0, 4) selects no texels of this image"), str(err.value)
+
+
+@pytest.mark.parametrize("names", [("R", "G", "B", "A"), ("Y",), ("Y", "A")])
+def test_read_image_exr_channels(tmp_path, names):
+    """An EXR photograph: R, G, B when all three are there (alpha is not colour), else Y; linear."""
+    import OpenEXR
+
+    from brdffit.io.images import read_image
+
+    rng = np.random.default_rng(8)
+    px = {n: rng.uniform(0, 2, (3, 5)).astype(np.float32) for n in names}
+    OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, dict(px)).write(str(tmp_path / "p.exr"))
+    colour = ["R", "G", "B"] if "R" in names else ["Y"]
+    np.testing.assert_array_equal(read_image(tmp_path / "p.exr"), np.stack([px[n] for n in colour], -1).astype(np.float64))
+    OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, {"A": px[names[0]]}).write(
+        str(tmp_path / "a.exr"))
+    with pytest.raises(ValueError, match=r"^no R,G,B or Y channels \(has A\)$"):
+        read_image(tmp_path / "a.exr")
+
+
+def test_metadata_in_full(tmp_path):
+    """What a folder's Measurement records of how it was read (SPEC's meta; ``brdffit info``)."""
+    table = codes(9)
+    root = write_folder(tmp_path / "meta", "png", "flat", table)
+    m = brdffit.load(root)
+    assert (m.name, m.source, m.grid) == ("meta", str(root), "ubo81")
+    assert m.meta == {"name": "meta", "source": str(root), "grid": "ubo81", "colour_space": "linear_rec709",
+                      "units": "1/sr", "format": "images", "layout": "flat", "image_types": (".png",),
+                      "decoding": "sRGB EOTF (IEC 61966-2-1) for 8/16-bit, EXR linear", "region": None,
+                      "includes_cos": False, "scale": 1.0, "light_directions": "nominal (file names)"}
+    raw = brdffit.load(root, srgb=False, region=[0, 1, 0, 1], scale=3, name="codes")
+    extra = {k: raw.meta[k] for k in ("decoding", "region", "scale", "name")}
+    assert extra == {"decoding": "codes taken as linear", "region": (0, 1, 0, 1), "scale": 3.0, "name": "codes"}
+    np.testing.assert_allclose(raw.table(), 3.0 * table / 255.0, rtol=1e-12)

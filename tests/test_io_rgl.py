@@ -163,3 +163,62 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
         rgl.load_measured(path)
     assert info.value.path == str(path)
     assert info.value.problem == "Mitsuba's measured plugin cannot read it: " + mitsuba_says[:300]
+
+
+_F32 = np.float32
+_TOO_SMALL_THETA = {"theta_i": np.array([0.5], _F32), "rgb": np.ones((1, 1, 3, 8, 8), _F32),
+                    "vndf": np.ones((1, 1, 8, 8), _F32), "luminance": np.ones((1, 1, 8, 8), _F32)}
+
+
+@pytest.mark.parametrize("replace, problem", [
+    ({"vndf": None}, "tensor_file lacks the field(s) vndf of an RGL RGB material"),
+    ({"vndf": None, "sigma": None}, "tensor_file lacks the field(s) sigma, vndf of an RGL RGB material"),
+    ({"ndf": np.ones((1, 8), _F32)}, "field(s) ndf too small to interpolate"),
+    ({"ndf": np.ones((8, 1), _F32), "sigma": np.ones((1, 8), _F32)}, "field(s) ndf, sigma too small to interpolate"),
+    (_TOO_SMALL_THETA, "field(s) theta_i too small to interpolate"),
+    ({"theta_i": np.array([np.pi / 2, 0.0], _F32)}, "field 'theta_i' must rise strictly within 0..pi/2"),
+    ({"theta_i": np.array([0.0, np.pi / 2 + 1e-3], _F32)}, "field 'theta_i' must rise strictly within 0..pi/2"),
+    ({"theta_i": np.array([-0.1, 1.0], _F32)}, "field 'theta_i' must rise strictly within 0..pi/2"),
+    ({"phi_i": np.array([7.0], _F32)}, "field 'phi_i' must rise strictly within -pi..2pi"),
+    ({"ndf": np.full((8, 8), -1.0, _F32)}, "field 'ndf' holds negative values (min -1); it is a distribution"),
+    ({"sigma": np.where(np.eye(8, dtype=bool), np.nan, 1.0).astype(_F32)}, "field 'sigma' holds 8 non-finite value(s)"),
+    ({"rgb": np.ones((1, 2, 3, 8, 8), np.uint8)},
+     "field 'rgb' is u1 with shape (1, 2, 3, 8, 8), expected <f4 with 5 axes"),
+    ({"vndf": np.ones((1, 3, 8, 8), _F32)},
+     "field 'vndf' has shape (1, 3, 8, 8), expected (1, 2, 8, 8) (from phi_i, theta_i, rgb)"),
+])
+def test_check_tensor_file_refusals_in_full(tmp_path, replace, problem):
+    """Each problem the checker finds before Mitsuba's plugin may read the file, message in full
+    (small materials written here by tests/tensor_file.py, no shared data)."""
+    from brdffit.io.rgl import check_tensor_file
+    from tensor_file import isotropic_material
+
+    p = isotropic_material(tmp_path / "bad.bsdf", [0.1] * 3, [0.2] * 3, **replace)
+    with pytest.raises(InputError) as err:
+        check_tensor_file(p)
+    assert str(err.value) == f"{p}: {problem}"
+
+
+def test_check_tensor_file_header_refusals_in_full(tmp_path):
+    from brdffit.io.rgl import check_tensor_file
+    from tensor_file import isotropic_material
+
+    good = isotropic_material(tmp_path / "good.bsdf", [0.1] * 3, [0.2] * 3)
+    assert check_tensor_file(good)["rgb"] == (10, (1, 2, 3, 8, 8))
+    data = good.read_bytes()
+    cases = {
+        "empty.bsdf": (b"", "empty file (expected an RGL tensor_file .bsdf)"),
+        "magic.bsdf": (b"tensor_fil\0" + data[11:], "not a Mitsuba tensor_file (wrong magic; expected 'tensor_file\\0')"),
+        "v2.bsdf": (data[:12] + b"\x02\x00" + data[14:], "unsupported tensor_file version 2.0 (expected 1.0)"),
+        "count.bsdf": (data[:14] + b"\0\0\0\0" + data[18:], "implausible tensor_file field count 0"),
+        "short.bsdf": (data[:16], "truncated tensor_file header at byte 14 of 16"),
+    }
+    for name, (content, problem) in cases.items():
+        p = tmp_path / name
+        p.write_bytes(content)
+        with pytest.raises(InputError) as err:
+            check_tensor_file(p)
+        assert str(err.value) == f"{p}: {problem}"
+    with pytest.raises(InputError) as err:
+        check_tensor_file(tmp_path)
+    assert str(err.value) == f"{tmp_path}: is a folder, not an RGL tensor_file .bsdf"

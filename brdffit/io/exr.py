@@ -35,6 +35,15 @@ from .npz import check_usable
 FORMAT_TAG = "ubo81-table/1"
 
 
+def colour_channels(names) -> tuple[str, ...] | None:
+    """The channels an EXR table or photograph is read from: R, G, B when all three are there
+    (others, such as A or brdffit's weight, are not colour), else Y; None when neither is."""
+    names = set(names)
+    if {"R", "G", "B"} <= names:
+        return ("R", "G", "B")
+    return ("Y",) if "Y" in names else None
+
+
 def _pack(a: np.ndarray) -> str:
     return base64.b64encode(zlib.compress(np.ascontiguousarray(a, dtype="<f8").tobytes(), 6)).decode("ascii")
 
@@ -119,11 +128,8 @@ def read(path, *, name: str | None = None) -> Measurement:
             problem = " ".join(str(exc).split())[:200]
     if problem is not None:
         raise InputError(path, f"unreadable OpenEXR (truncated or corrupt): {problem}")
-    if {"R", "G", "B"} <= set(chans):
-        names = ("R", "G", "B")
-    elif "Y" in chans:
-        names = ("Y",)
-    else:
+    names = colour_channels(chans)
+    if names is None:
         raise InputError(path, f"no R,G,B or Y channels (has {', '.join(sorted(chans)) or 'none'})")
     shape = chans[names[0]].shape
     if shape != (UBO_SIZE, UBO_SIZE):

@@ -142,13 +142,14 @@ def read_image(f: Path, *, srgb: bool = True) -> np.ndarray:
     if suffix == ".exr":
         import OpenEXR
 
+        from .exr import colour_channels
+
         exr = OpenEXR.File(str(f), separate_channels=True)
         ch = {k: np.asarray(v.pixels, dtype=np.float64) for k, v in exr.channels().items()}
-        if {"R", "G", "B"} <= set(ch):
-            return np.stack([ch["R"], ch["G"], ch["B"]], axis=-1)
-        if "Y" in ch:
-            return ch["Y"][..., None]
-        raise ValueError(f"no R,G,B or Y channels (has {', '.join(sorted(ch))})")
+        names = colour_channels(ch)
+        if names is None:
+            raise ValueError(f"no R,G,B or Y channels (has {', '.join(sorted(ch))})")
+        return np.stack([ch[n] for n in names], axis=-1)
     from PIL import Image
 
     with Image.open(f) as im:
