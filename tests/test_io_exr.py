@@ -120,6 +120,13 @@ def test_weights_not_float32_exact_are_stored_as_float64_with_their_nans(tmp_pat
     assert sorted(f64) == ["weights"]
     np.testing.assert_array_equal(unpack_by_hand(f64["weights"], (6561,)), weights)
     np.testing.assert_array_equal(chans["weight"].pixels, weights.astype(np.float32).reshape(81, 81))
+    np.testing.assert_array_equal(np.asarray(brdffit.load(p).weights), weights)  # read back exactly, NaNs too
+
+
+def test_a_given_name_replaces_the_stored_one(tmp_path):
+    p = tmp_path / "n.exr"
+    exr.write(ubo(f32_exact_values(1)), p)
+    assert brdffit.load(p).name == "t" and brdffit.load(p, name="given").name == "given"
 
 
 def test_directions_off_the_grid_are_stored(tmp_path):

@@ -144,11 +144,24 @@ def test_resample_evaluable_and_ubo_unchanged():
 def test_load_errors_name_the_file(tmp_path):
     with pytest.raises(InputError, match="no such file"):
         brdffit.load(tmp_path / "nope.exr")
-    p = tmp_path / "x.xyz"
-    p.write_text("1 2 3")
-    with pytest.raises(InputError, match="unknown format") as e:
-        brdffit.load(p)
-    assert str(p) in str(e.value)
+    known = ".bin, .binary, .brdf, .bsdf, .exr, .npz"
+    for p in (tmp_path / "x.xyz", tmp_path / "noext"):
+        p.write_text("1 2 3")
+        with pytest.raises(InputError) as e:
+            brdffit.load(p)
+        ext = repr(p.suffix or "none")
+        assert str(e.value) == f"{p}: unknown format (extension {ext}; known: {known}, or an image folder)"
+
+
+def test_a_measurement_without_a_usable_sample_is_refused_naming_the_file(tmp_path):
+    from brdffit.io import check_measurement
+
+    m = brdffit.Measurement(wi=[[0, 0, 1.0]] * 3, wo=[[0.6, 0, 0.8]] * 2 + [[0.6, 0, -0.8]],
+                            values=[[np.nan], [1.0], [1.0]], weights=[1.0, 0.0, 1.0])
+    with pytest.raises(InputError) as e:
+        check_measurement(m, tmp_path / "m.npz")
+    assert str(e.value) == (f"{tmp_path / 'm.npz'}: no usable sample among 3: every value is NaN/inf, has weight 0 "
+                            "or a direction below the horizon")
 
 
 @pytest.mark.skipif(not (RGL_FILES and CORNELL_FILES), reason="real measurements not found")

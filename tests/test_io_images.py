@@ -51,6 +51,13 @@ def eotf(c):
     return colour.models.eotf_sRGB(np.asarray(c, np.float64))
 
 
+def test_srgb_eotf_computes_in_float64():
+    codes32 = np.array([0.5, 0.9], np.float32)
+    got = srgb_to_linear(codes32)
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got, ((codes32.astype(np.float64) + 0.055) / 1.055) ** 2.4)
+
+
 def test_srgb_eotf_exact():
     c = np.array([0.0, 0.04045, 0.5, 1.0])
     np.testing.assert_allclose(srgb_to_linear(c), [0, 0.04045 / 12.92, ((0.555) / 1.055) ** 2.4, 1.0], rtol=1e-15)
@@ -138,8 +145,9 @@ def test_missing_duplicate_offgrid_named(tmp_path):
         brdffit.load(root)
     (root / f"x_{direction_name(3, 4)}.png").unlink()
     Image.fromarray(table[3, 4][None, None]).save(root / "tl015_pl010_tv000_pv000.png")
-    with pytest.raises(InputError, match="tl015_pl010 is not on the UBO-81 grid"):
+    with pytest.raises(InputError) as err:
         brdffit.load(root)
+    assert str(err.value) == f"{root / 'tl015_pl010_tv000_pv000.png'}: light direction tl015_pl010 is not on the UBO-81 grid"
     (root / "tl015_pl010_tv000_pv000.png").unlink()
     (root / "notes.txt").write_text("ignored")
     Image.fromarray(table[0, 0][None, None]).save(root / "photo.png")
@@ -211,7 +219,9 @@ def test_read_image_exr_channels(tmp_path, names):
     px = {n: rng.uniform(0, 2, (3, 5)).astype(np.float32) for n in names}
     OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, dict(px)).write(str(tmp_path / "p.exr"))
     colour = ["R", "G", "B"] if "R" in names else ["Y"]
-    np.testing.assert_array_equal(read_image(tmp_path / "p.exr"), np.stack([px[n] for n in colour], -1).astype(np.float64))
+    got = read_image(tmp_path / "p.exr")
+    assert got.dtype == np.float64  # (a float32 mean over an image's texels would round)
+    np.testing.assert_array_equal(got, np.stack([px[n] for n in colour], -1).astype(np.float64))
     OpenEXR.File({"compression": OpenEXR.NO_COMPRESSION, "type": OpenEXR.scanlineimage}, {"A": px[names[0]]}).write(
         str(tmp_path / "a.exr"))
     with pytest.raises(ValueError, match=r"^no R,G,B or Y channels \(has A\)$"):

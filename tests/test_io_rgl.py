@@ -222,3 +222,39 @@ def test_check_tensor_file_header_refusals_in_full(tmp_path):
     with pytest.raises(InputError) as err:
         check_tensor_file(tmp_path)
     assert str(err.value) == f"{tmp_path}: is a folder, not an RGL tensor_file .bsdf"
+
+
+def test_check_tensor_file_names_overlapping_fields_and_unreadable_files(tmp_path):
+    import struct
+
+    from brdffit.io.rgl import check_tensor_file
+    from tensor_file import isotropic_material
+
+    data = bytearray(isotropic_material(tmp_path / "good.bsdf", [0.1] * 3, [0.2] * 3).read_bytes())
+
+    def offset_at(name: bytes) -> int:  # after the name: ndim u16, type u8, then the u64 offset
+        return data.index(struct.pack("<H", len(name)) + name) + 2 + len(name) + 3
+
+    phi_offset = struct.unpack_from("<Q", data, offset_at(b"phi_i"))[0]
+    struct.pack_into("<Q", data, offset_at(b"theta_i"), phi_offset)  # theta_i (8 bytes) over phi_i (4)
+    p = tmp_path / "overlap.bsdf"
+    p.write_bytes(bytes(data))
+    with pytest.raises(InputError) as err:
+        check_tensor_file(p)
+    assert str(err.value) == f"{p}: garbled field table: fields 'phi_i' and 'theta_i' overlap"
+    with pytest.raises(InputError) as err:
+        check_tensor_file(tmp_path / "missing.bsdf")
+    assert str(err.value) == f"{tmp_path / 'missing.bsdf'}: cannot read: No such file or directory"
+
+
+def test_rgl_directions_at_the_horizon_get_weight_zero(tmp_path):
+    """SPEC: a sample with the light or the view at or below the horizon is not measured (weight 0,
+    value 0), also exactly at the horizon (z = 0)."""
+    from tensor_file import isotropic_material
+
+    p = isotropic_material(tmp_path / "h.bsdf", [0.1] * 3, [0.2] * 3)
+    up, horizon = [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]
+    m = brdffit.load(p, wi=[up, up, horizon], wo=[up, horizon, up])
+    np.testing.assert_array_equal(np.asarray(m.weights), [1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(np.asarray(m.values)[1:], 0.0)
+    assert np.all(np.asarray(m.values)[0] > 0)
