@@ -144,3 +144,17 @@ def test_summary_without_valid_samples_or_format():
     assert [r["channel"] for r in s["ranges"]] == ["c0", "c1"]
     for r in s["ranges"]:
         assert np.isnan(r["min"]) and np.isnan(r["max"]) and np.isnan(r["mean"]) and r["negative"] == 0
+
+
+def test_device_copy_is_a_private_float64_copy():
+    """device_put may share a NumPy array's memory on the CPU (it does for 64-byte aligned arrays:
+    seen with JAX 0.10): a reader's Measurement must not change when the reader's buffer does."""
+    buf = np.zeros(1000 + 8)
+    start = (-buf.ctypes.data % 64) // 8
+    a = buf[start:start + 1000]  # 64-byte aligned
+    a[:] = np.arange(1000.0)
+    out = _common.device_copy(a)
+    a[:] = -1.0
+    assert out.dtype == np.float64
+    np.testing.assert_array_equal(np.asarray(out), np.arange(1000.0))
+    assert _common.device_copy([1, 2]).dtype == np.float64

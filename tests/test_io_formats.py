@@ -142,8 +142,10 @@ def test_resample_evaluable_and_ubo_unchanged():
 
 
 def test_load_errors_name_the_file(tmp_path):
-    with pytest.raises(InputError, match="no such file"):
-        brdffit.load(tmp_path / "nope.exr")
+    for fmt in (None, "exr"):  # detected, or given (no detection)
+        with pytest.raises(InputError) as e:
+            brdffit.load(tmp_path / "nope.exr", format=fmt)
+        assert str(e.value) == f"{tmp_path / 'nope.exr'}: no such file or folder"
     known = ".bin, .binary, .brdf, .bsdf, .exr, .npz"
     for p in (tmp_path / "x.xyz", tmp_path / "noext"):
         p.write_text("1 2 3")

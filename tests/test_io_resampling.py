@@ -228,3 +228,24 @@ def test_qhull_refusal_quotes_the_first_80_characters_of_scipy_message():
     with pytest.raises(InputError) as info:
         interpolate_scattered(m, reciprocal=False)
     assert str(info.value).endswith(f"cannot interpolate them onto the UBO-81 grid ({expected})")
+
+
+def test_resample_of_a_path_passes_progress_to_the_reader(tmp_path, monkeypatch):
+    """``resample(path, progress=True)`` reads with the progress display on, as ``load`` does
+    (the readers consult brdffit.io.PROGRESS while they read)."""
+    import brdffit.io
+    import brdffit.io.npz
+
+    wi, wo = ubo_pairs()
+    p = brdffit.save(brdffit.Measurement(wi=wi, wo=wo, values=np.full((6561, 1), 0.3), grid="ubo81"), tmp_path / "m.npz")
+    seen = []
+    read = brdffit.io.npz.read
+
+    def spy(path, **options):
+        seen.append(brdffit.io.PROGRESS.get())
+        return read(path, **options)
+
+    monkeypatch.setattr(brdffit.io.npz, "read", spy)
+    resample(p, progress=True)
+    resample(p)
+    assert seen == [True, False]

@@ -163,6 +163,16 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
         rgl.load_measured(path)
     assert info.value.path == str(path)
     assert info.value.problem == "Mitsuba's measured plugin cannot read it: " + mitsuba_says[:300]
+    # a failure while evaluating (after the plugin loaded the file) is reported the same way
+
+    def failing(path, light, view):
+        raise RuntimeError("drjit:\n  evaluation   failed " + "x" * 400)
+
+    monkeypatch.setattr(rgl, "eval_mitsuba", failing)
+    with pytest.raises(InputError) as info:
+        rgl.read(path)
+    said = ("drjit: evaluation failed " + "x" * 400)[:300]
+    assert str(info.value) == f"{path}: Mitsuba's measured plugin cannot read it: {said}"
 
 
 _F32 = np.float32
@@ -245,6 +255,24 @@ def test_check_tensor_file_names_overlapping_fields_and_unreadable_files(tmp_pat
     with pytest.raises(InputError) as err:
         check_tensor_file(tmp_path / "missing.bsdf")
     assert str(err.value) == f"{tmp_path / 'missing.bsdf'}: cannot read: No such file or directory"
+
+
+def test_check_tensor_file_names_a_field_cut_short(tmp_path):
+    import re
+    import struct
+
+    from brdffit.io.rgl import check_tensor_file
+    from tensor_file import isotropic_material
+
+    data = isotropic_material(tmp_path / "good.bsdf", [0.1] * 3, [0.2] * 3).read_bytes()
+    at = data.index(b"\x05\x00valid") + 2 + 5 + 3  # the last field, 64 bytes of uint8
+    offset = struct.unpack_from("<Q", data, at)[0]
+    p = tmp_path / "cut.bsdf"
+    p.write_bytes(data[:offset + 60])
+    with pytest.raises(InputError) as err:
+        check_tensor_file(p)
+    assert re.fullmatch(rf"{re.escape(str(p))}: truncated or garbled: field 'valid' declares bytes {offset}\.\.{offset + 64}, "
+                        rf"the file has {offset + 60} \(header ends at \d+\)", str(err.value)), str(err.value)
 
 
 def test_rgl_directions_at_the_horizon_get_weight_zero(tmp_path):
