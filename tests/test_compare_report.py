@@ -37,3 +37,28 @@ def test_exact_ties_keep_the_first_of_equally_fast_rows_even_without_tolerance()
     near = (_row("ggx", "lm", 0.02 * (1 - 1e-8), 2.0), _row("ggx", "lmb", 0.02, 1.0))
     assert [r["solver"] for r in Report(near).pareto()] == ["lmb"]
     assert [r["solver"] for r in Report(near).pareto(rtol=0.0)] == ["lmb", "lm"]
+
+
+def test_repr_names_the_data_the_rows_and_the_best_log_loss():
+    rows = ROWS + (_row("ggx", "dogleg", 0.0123456, 2.0),)
+    assert repr(Report(rows, "felt")) == "Report('felt': 4 rows; best log loss 0.01 (ward / bfgs))"
+    assert repr(Report(rows[:2] + rows[3:], "felt")) == "Report('felt': 3 rows; best log loss 0.01235 (ggx / dogleg))"
+    assert repr(Report((), "empty")) == "Report('empty': 0 rows)"
+
+
+def test_compare_without_models_fits_every_registered_model(monkeypatch):
+    """``models=None`` (the default) means every model of the registry: here a registry of two, so
+    that the test fits two small models, not all of them."""
+    import numpy as np
+
+    import brdffit
+    from brdffit import models as registry
+    from brdffit.fitting import compare
+
+    monkeypatch.setattr(registry, "names", lambda: ["lambert", "phong"])
+    wi, wo = brdffit.ubo_pairs()
+    m = brdffit.Measurement(wi=wi, wo=wo, values=np.full((6561, 1), 0.2), grid="ubo81", name="grey")
+    seen = []
+    rep = compare(m, solvers=["lm"], progress=seen.append)
+    assert [r["model"] for r in rep.rows] == ["lambert", "phong"] and len(seen) == 2
+    assert compare(m, models=[], solvers=["lm"]).rows[0]["model"] == "lambert"  # empty: the same default

@@ -96,6 +96,26 @@ def test_standard_errors_shrink_with_less_noise():
     assert abs(a.params["alpha"][0] - 0.25) < 5 * a.stderr["alpha"][0]
 
 
+@pytest.mark.parametrize("loss, solver", [("l2", "lm"), ("cosine_l2", "lm"), ("l2", "scipy")])
+def test_standard_errors_equal_scipy_curve_fit(loss, solver):
+    """A known value: Lambert (f = kd / pi) on one noisy channel is a linear least-squares problem
+    (weighted by cos theta_i for cosine_l2), whose estimate and covariance scipy's curve_fit gives
+    independently: s^2 (J'J)^-1 with s^2 = sum r^2 / (n - p)."""
+    from scipy.optimize import curve_fit
+
+    rng = np.random.default_rng(11)
+    n = 200
+    wi = np.asarray(spherical_to_cartesian(rng.uniform(0.0, 1.2, n), rng.uniform(0.0, 2 * np.pi, n)))
+    wo = np.asarray(spherical_to_cartesian(rng.uniform(0.0, 1.2, n), rng.uniform(0.0, 2 * np.pi, n)))
+    y = 0.5 / np.pi + 0.02 * rng.normal(size=n)
+    r = fit(brdffit.Measurement(wi=wi, wo=wo, values=y[:, None]), "lambert", loss=loss, solver=solver)
+    sigma = 1.0 / wi[:, 2] if loss == "cosine_l2" else None
+    popt, pcov = curve_fit(lambda x, kd: kd / np.pi * np.ones_like(x), np.zeros(n), y, p0=[0.4], sigma=sigma)
+    assert r.converged and r.status == ("converged (scipy least_squares)" if solver == "scipy" else "converged")
+    np.testing.assert_allclose(r.params["kd"], popt, rtol=1e-8)
+    np.testing.assert_allclose(r.stderr["kd"], np.sqrt(np.diag(pcov)), rtol=1e-6)
+
+
 def test_exclusions_are_counted_and_ignored():
     m = _measurement()
     values = np.array(m.values)
@@ -312,6 +332,13 @@ def test_progress_hears_every_phase_and_compiling_only_when_it_compiles():
     again = []
     fit(m, "lambert", rtol=2.3456e-7, progress=again.append)
     assert [n.split(":")[0] for n in again] == ["initialising", "solving", "solved"], again
+
+
+def test_progress_hears_the_start_grid_compile_on_the_scipy_path():
+    notes = []
+    fit(_measurement(n=137), "lambert", loss="l2", solver="scipy", progress=notes.append)  # shapes of its own
+    assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "solved"], notes
+    assert notes[2].startswith("compiling: init (")
 
 
 def test_an_unknown_solver_name_is_named_by_make_solver():

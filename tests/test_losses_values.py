@@ -96,6 +96,9 @@ def test_log_rmse_over_the_used_samples_only():
                          for c in range(2)) / 2)
     assert float(L.log_rmse(F, REF, COS, used)) == pytest.approx(want, rel=1e-13)
     np.testing.assert_allclose(np.asarray(L.log_residual(F, REF, COS)), _each(WANT["log"]), rtol=1e-13)
+    # one sample, one channel: the RMS of one residual is its size
+    one = abs(math.log1p(F[0, 0] * COS[0, 0]) - math.log1p(REF[0, 0] * COS[0, 0]))
+    assert float(L.log_rmse(F[:1, :1], REF[:1, :1], COS[:1], np.ones((1, 1)))) == pytest.approx(one, rel=1e-13)
     # no used sample: 0, not a division by zero
     assert float(L.log_rmse(F, REF, COS, np.zeros((2, 1)))) == 0.0
 

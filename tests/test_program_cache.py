@@ -154,3 +154,18 @@ def test_programs_on_disk_are_pruned_least_recently_used_first(tmp_path, monkeyp
     cache.load_or_compile(("prune_test_c",), lambda: (lambda x: 5.0 * x), example)
     (c,) = set(folder.glob("*.bin")) - before
     assert sorted(folder.glob("*.bin")) == sorted([files["a"], c])
+
+
+def test_prune_stops_at_the_limit_and_never_deletes_the_program_just_written(tmp_path, monkeypatch):
+    """Files of known sizes and use times: the oldest go until the rest fit the limit exactly; the
+    one just written stays even when it is the oldest; other files are not programs."""
+    from brdffit.fitting import cache
+
+    for name, when in (("x", 1), ("y", 2), ("z", 3), ("kept", 0)):
+        p = tmp_path / f"{name}.bin"
+        p.write_bytes(b"\0" * 100)
+        os.utime(p, (when, when))
+    (tmp_path / "notes.txt").write_bytes(b"\0" * 1000)
+    monkeypatch.setattr(cache, "PROGRAMS_MAX_BYTES", 300)
+    cache._prune(tmp_path, keep=tmp_path / "kept.bin")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.bin", "notes.txt", "y.bin", "z.bin"]

@@ -68,3 +68,29 @@ def test_the_cache_folder_is_the_setting_or_the_users_cache(monkeypatch, tmp_pat
     assert str(cache.cache_dir()).startswith(str(Path.home()))
     monkeypatch.delenv("BRDFFIT_CACHE")
     assert cache.cache_dir() == Path(platformdirs.user_cache_dir("brdffit")) / "jax"
+
+
+def test_enable_points_jax_at_the_folder_once(tmp_path, monkeypatch):
+    """``enable`` sets JAX's persistent cache to BRDFFIT_CACHE's folder (created) and keeps every
+    program (no minimum compile time or size); a read-only place leaves the cache off."""
+    import jax
+
+    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+             "jax_persistent_cache_min_entry_size_bytes")
+    before = {n: getattr(jax.config, n) for n in names}
+    monkeypatch.setitem(cache._STATE, "dir", None)
+    try:
+        monkeypatch.setenv("BRDFFIT_CACHE", str(tmp_path / "made" / "here"))
+        path = cache.enable()
+        assert path == tmp_path / "made" / "here" and path.is_dir() and cache._STATE["dir"] == path
+        assert [getattr(jax.config, n) for n in names] == [str(path), 0.0, 0]
+        assert cache.enable() == path
+        blocker = tmp_path / "a-file"
+        blocker.write_text("")
+        monkeypatch.setenv("BRDFFIT_CACHE", str(blocker / "below"))  # mkdir fails below a file
+        assert cache.enable() is None and cache._STATE["dir"] == path
+        monkeypatch.setenv("BRDFFIT_CACHE", "off")
+        assert cache.enable() is None
+    finally:
+        for n, value in before.items():
+            jax.config.update(n, value)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Mapping
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -14,7 +13,7 @@ from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
 from .losses import check_loss
-from .problem import Data, flat_residual, loss_values, prepare, resolve_model
+from .problem import loss_values, prepare, resolve_model
 from .result import FitResult
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
 from .program import STATUS_TEXT, check_solver, compiled, program_args, run_fit
@@ -27,9 +26,10 @@ from .._fit_defaults import COMPOSITE_STARTS, DEFAULT_LOSS, DEFAULT_SOLVER  # no
 STDERR_MAX_COND = 1e12
 
 
-def standard_errors(model: Model, loss: str, params, data: Data | None, loss_value: float, n_residuals: int,
-                    lo=None, hi=None, free=None, jtj=None):
+def standard_errors(model: Model, params, jtj, loss_value: float, n_residuals: int, lo, hi, free=None):
     """Per parameter: standard errors from J'J at the solution (sigma^2 (J'J)^-1), or None.
+    ``jtj``: the Gauss-Newton matrix of the fit's residuals at ``params``; ``loss_value``: their sum
+    of squares; ``n_residuals``: their number.
 
     None for a parameter at one of its bounds (the active constraint makes the Gaussian
     approximation meaningless there), and for a parameter with a share in a (near) null direction
@@ -39,10 +39,6 @@ def standard_errors(model: Model, loss: str, params, data: Data | None, loss_val
     """
     v = np.concatenate([np.broadcast_to(np.asarray(params[p.name], np.float64).reshape(-1), (model.size(p),))
                         for p in model.params])
-    if jtj is None:
-        jtj = np.asarray(jax.jit(gauss_newton_matrix(model, loss))(jnp.asarray(v), data))
-    if lo is None or hi is None:
-        lo, hi = model.bounds()
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     tol = 1e-9 * np.maximum(np.abs(v), 1e-300)
     at_bound = (np.abs(v - lo) <= tol) | (np.abs(v - hi) <= tol)
@@ -251,7 +247,7 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
         jtj_fn, _ = compiled(("jtj", m, loss), lambda: gauss_newton_matrix(m, loss), *args)
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
-    stderr = standard_errors(m, loss, params, prep.data, value, prep.n_used * prep.channels, lo, hi, free, jtj=jtj)
+    stderr = standard_errors(m, params, jtj, value, prep.n_used * prep.channels, lo, hi, free)
     at_bound = space.at_bound(v)
     wo = np.asarray(measurement.wo)[prep.used]
     warnings = fit_warnings(space, v, at_bound, stderr, sample_spacing(wo))

@@ -75,7 +75,8 @@ class Report:
             return tie and (q["run_s"] < r["run_s"] or kq < kr)
 
         front = [r for r in rows if not any(beats(q, r) for q in rows if q[0] != r[0])]
-        return [r for _, r in sorted(front, key=lambda kr: (kr[1]["run_s"], kr[0]))]
+        # No two rows of the front are equally fast (of two such, one beats the other).
+        return [r for _, r in sorted(front, key=lambda kr: kr[1]["run_s"])]
 
     def plot(self, metric: str = "loss_log"):
         """:func:`brdffit.plot.pareto` of this report (a matplotlib Figure)."""

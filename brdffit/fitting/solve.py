@@ -357,7 +357,7 @@ def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: f
     return run
 
 
-def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str = "exact"):
+def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):
     """scipy.optimize.least_squares (TRF, bounded) on the free parameters of the flat vector.
 
     ``jac="exact"`` uses the JAX Jacobian (jit-compiled); "2-point"/"3-point" scipy's finite
