@@ -209,6 +209,8 @@ def test_init_options_and_bad_arguments():
     for kwargs in ({"loss": "bad"}, {"solver": "bad"}, {"init": "bad"}, {"max_steps": 0}):
         with pytest.raises(UsageError):
             fit(m, "ggx", **kwargs)
+    with pytest.raises(UsageError, match=r"^multistart must be >= 0$"):
+        fit(m, "ggx", multistart=-1)
     with pytest.raises(UsageError):
         fit(m, "no_such_model")
 
@@ -346,3 +348,105 @@ def test_an_unknown_solver_name_is_named_by_make_solver():
 
     with pytest.raises(ValueError, match="^newton$"):
         make_solver("newton", 1e-8, 0.0)
+
+
+def test_result_check_codes():
+    """The check of the solver's point: 0 when finite and no worse than the start; 2 when worse;
+    3 when the loss or the point is not finite (a NaN loss also fails "no worse", and must not be
+    reported as a divergence); a failure code the solver gave is kept."""
+    from brdffit.fitting.solve import result_check
+
+    v = jnp.array([0.5, 2.0])
+    cases = [((0.5, 1.0, v, 0), (True, 0)), ((2.0, 1.0, v, 0), (False, 2)),
+             ((jnp.nan, 1.0, v, 0), (False, 3)), ((jnp.inf, 1.0, v, 0), (False, 3)),
+             ((0.5, 1.0, v.at[1].set(jnp.nan), 0), (False, 3)),
+             ((jnp.nan, 1.0, v, 1), (False, 1)), ((0.5, 1.0, v, 1), (True, 1)),
+             ((1.0 + 1e-12, 1.0, v, 0), (True, 0)),  # roundoff above the start's loss is no worse
+             ((1.5, 1.0, v, 0), (False, 2))]
+    for (value, l0, point, code), want in cases:
+        ok, got = result_check(value, l0, point, jnp.asarray(code), 0.0)
+        assert (bool(ok), int(got)) == want, (value, point, code)
+    ok, got = result_check(1.5, 1.0, v, jnp.asarray(0), 0.6)  # within the loss floor
+    assert (bool(ok), int(got)) == (True, 0)
+
+
+class _FixedScene:
+    """What ``fit(scene=...)`` uses of a ``brdffit.scene.Usage``: weights for a measurement."""
+
+    def __init__(self, weights):
+        self._weights = weights
+
+    def weights(self, measurement):
+        assert len(self._weights) == len(measurement.wi)
+        return self._weights
+
+
+def test_a_scene_multiplies_the_given_weights():
+    """SPEC 12: the samples are weighted by where the scene looks, times ``weights``. A Lambert
+    fit to Blinn-Phong data depends on the weights, so each combination is told apart."""
+    m = _measurement({"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "n": [30.0]}, model="blinn_phong", n=300)
+    rng = np.random.default_rng(5)
+    scene_w, user_w = rng.uniform(0.05, 1.0, 300), rng.uniform(0.05, 1.0, 300)
+
+    def kd(**kw):
+        return np.asarray(fit(m, "lambert", loss="l2", **kw).params["kd"])
+
+    np.testing.assert_allclose(kd(scene=_FixedScene(scene_w)), kd(weights=scene_w), rtol=1e-10)
+    both = kd(scene=_FixedScene(scene_w), weights=user_w)
+    np.testing.assert_allclose(both, kd(weights=scene_w * user_w), rtol=1e-10)
+    assert np.abs(both - kd(weights=user_w)).max() > 1e-3  # the scene's weights mattered
+
+
+@pytest.mark.parametrize("side", ["lower", "upper"])
+def test_standard_errors_count_a_value_within_the_tolerance_as_at_its_bound(side):
+    """A value within 1e-9 (relative) of a bound counts as at the bound, on either side, the
+    tolerance included; twice as far it does not. v = 1e9 makes the tolerance exactly 1.0."""
+    from brdffit.fitting.api import standard_errors
+    from brdffit.fitting.problem import resolve_model
+
+    model = resolve_model("lambert", 1)
+    v = 1e9
+    tol = 1e-9 * v
+    assert tol == 1.0
+    jtj = np.array([[4.0]])
+    for distance, at_bound in ((tol, True), (2 * tol, False)):
+        lo, hi = (v - distance, np.inf) if side == "lower" else (0.0, v + distance)
+        assert abs(v - (lo if side == "lower" else hi)) == distance  # exact in float64
+        se = standard_errors(model, {"kd": [v]}, jtj, 1.0, 10, [lo], [hi])["kd"]
+        assert (se is None) == at_bound, (side, distance)
+
+
+@pytest.mark.parametrize("solver", ["gauss_newton", "dogleg", "bfgs", "optx_lm"])
+def test_a_start_the_data_cannot_see_is_converged_not_nan(solver):
+    """Every free Jacobian column zero at the start (a Blinn-Phong lobe of exponent 1e5 underflows
+    to 0 away from the mirror direction, kd and n held): the stock solvers' column scaling must
+    not divide by those zero norms; the fit stands at its start, converged."""
+    m = models.get("blinn_phong")
+    wi, wo = _directions(600, seed=3)
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
+    keep = h[:, 2] < np.cos(np.radians(15.0))  # (n.h)^1e5 < 1e-1500: exactly 0 in float64
+    wi, wo = wi[keep], wo[keep]
+    params = m.check_params({"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "n": [1e5]})
+    f = np.asarray(m.eval(params, wi, wo))
+    np.testing.assert_allclose(f, np.broadcast_to([0.3 / np.pi, 0.2 / np.pi, 0.1 / np.pi], f.shape), rtol=1e-15)
+    r = fit(brdffit.Measurement(wi, wo, f), "blinn_phong", solver=solver, init={"ks": [0.7, 0.7, 0.7]},
+            fixed={"kd": [0.3, 0.2, 0.1], "n": 1e5})
+    assert r.status == "converged", r.status
+    np.testing.assert_array_equal(r.params["ks"], [0.7, 0.7, 0.7])
+    np.testing.assert_allclose(r.params["kd"], [0.3, 0.2, 0.1], rtol=1e-12)
+
+
+@pytest.mark.parametrize("solver", ["gauss_newton", "dogleg", "optx_lm"])
+def test_excluded_samples_do_not_keep_a_stock_solver_from_stopping(solver):
+    """An excluded sample keeps its row with weight 0: its residual is exactly 0 at every step.
+    optimistix's stopping test divides each residual's change by rtol |residual| (+ atol): the
+    fit must still stop, at the fit of the measurement without those samples."""
+    m = _measurement(noise=0.01)
+    w = np.ones(400)
+    w[::7] = 0.0
+    keep = w > 0
+    r = fit(m, "ggx", solver=solver, weights=w)
+    assert r.status == "converged" and r.steps < 200, (r.status, r.steps)
+    without = fit(brdffit.Measurement(m.wi[keep], m.wo[keep], m.values[keep]), "ggx", solver=solver)
+    for name in ("kd", "ks", "alpha", "f0"):
+        np.testing.assert_allclose(r.params[name], without.params[name], rtol=1e-4)

@@ -227,6 +227,12 @@ def make_solver(name: str, rtol: float, atol: float, normal_equations: Callable 
         return BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=normal_equations)
     # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
     # for rank-deficient systems (SVD).
+    # optimistix stops when every |change| < atol + rtol |value|, per residual and per unknown:
+    # with atol = 0, a residual or unknown that is exactly 0 and stays so (an excluded sample,
+    # weight 0; a parameter held at 0) gives 0/0 = NaN, and the solve never stops (seen: any
+    # weight-0 sample ran gauss_newton, dogleg and optx_lm to max_steps). The smallest normal
+    # float is no tolerance at all otherwise.
+    atol = max(float(atol), float(np.finfo(np.float64).tiny))
     if name == "optx_lm":
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     if name == "gauss_newton":
@@ -262,9 +268,11 @@ def result_check(value, l0, v, code, loss_floor):
     """(ok, code): whether the solver's point v with loss ``value`` (evaluated afresh) may stand,
     i.e. is finite and no worse than the start's loss l0 beyond roundoff, whatever the solver
     claims; if not, a failure code (2: worse, 3: non-finite) unless the solver gave one."""
-    ok = jnp.all(jnp.isfinite(v)) & jnp.isfinite(value) & (value <= l0 * (1 + 1e-9) + loss_floor)
-    code = jnp.where(ok | (code != 0), code, 2)
-    code = jnp.where(jnp.isfinite(value) | (code != 0), code, 3)
+    finite = jnp.all(jnp.isfinite(v)) & jnp.isfinite(value)
+    ok = finite & (value <= l0 * (1 + 1e-9) + loss_floor)
+    # Non-finite first: a NaN loss also fails the comparison, and must not read as "worse".
+    mine = jnp.where(finite, jnp.where(ok, 0, 2), 3)
+    code = jnp.where(code != 0, code, mine)
     return ok, code
 
 
