@@ -116,16 +116,18 @@ def test_box_transform_known_values():
     np.testing.assert_allclose(to_box(from_box(v, lo, hi), lo, hi), v, rtol=1e-12)
 
 
+@pytest.mark.parametrize("scale", [1e-12, 1e12])
 @pytest.mark.parametrize("loss", ["l2", "relative", "cbrt"])
-def test_table_times_1e_minus_12_fits_to_the_same_relative_error(loss):
+def test_a_scaled_table_fits_to_the_same_relative_error(loss, scale):
+    """Every stopping test is relative (README): a table times 1e-12 or 1e12 gives the same fit."""
     # Parameters inside ggx's bounds (an active bound, ks <= 1, is not scale-free by nature).
     inside = {**TRUTH, "ks": [0.6, 0.5, 0.4]}
     a = fit(_measurement(inside), "ggx", loss=loss)
-    b = fit(_measurement(inside, scale=1e-12), "ggx", loss=loss)
+    b = fit(_measurement(inside, scale=scale), "ggx", loss=loss)
     assert a.converged and b.converged, (a.status, b.status)
     np.testing.assert_allclose(b.metrics["rel_rmse"], a.metrics["rel_rmse"], rtol=1e-5)
     np.testing.assert_allclose(b.params["alpha"], a.params["alpha"], rtol=1e-5)
-    np.testing.assert_allclose(b.params["kd"], 1e-12 * a.params["kd"], rtol=1e-5)
+    np.testing.assert_allclose(b.params["kd"], scale * a.params["kd"], rtol=1e-5)
 
 
 def test_log_loss_on_a_tiny_table_converges():
@@ -210,3 +212,37 @@ def test_default_tolerance_stops_within_it_of_the_minimum(name):
     assert default.converged, default.status
     assert tight.loss_value <= default.loss_value * (1 + 1e-12)
     assert default.loss_value <= tight.loss_value * (1 + 3 * DEFAULT_RTOL), (default.loss_value / tight.loss_value - 1)
+
+
+def test_lm_takes_no_step_the_gauss_newton_decrement_says_is_not_needed():
+    """README: lm stops when a step, or the Gauss-Newton decrement at the new point (g' (J'J)^-1 g,
+    the decrease a full step would bring), would bring less than rtol x the loss. So where it
+    stopped that decrement, computed here with NumPy, is below rtol x the loss, and one step
+    earlier it was not (else that last step was not needed). A plain problem: a decaying
+    exponential plus a constant, fitted to 60 noisy points."""
+    import jax
+
+    rtol = 1e-6
+    t = np.linspace(0.0, 4.0, 60)
+    y = 0.8 * np.exp(-1.3 * t) + 0.2 + 0.01 * np.random.default_rng(0).standard_normal(t.size)
+
+    def residual(p, _):
+        return (p[0] * jnp.exp(-p[1] * t) + p[2] - y) / np.sqrt(t.size)
+
+    def solve(max_steps):
+        return optx.least_squares(residual, make_solver("lm", rtol, 0.0), jnp.asarray([2.0, 0.3, 0.0]),
+                                  options={"lower": jnp.full(3, -jnp.inf), "upper": jnp.full(3, jnp.inf),
+                                           "free": jnp.ones(3, bool)}, max_steps=max_steps, throw=False)
+
+    def decrement_and_loss(p):
+        r = np.asarray(residual(p, None))
+        J = np.asarray(jax.jacfwd(residual)(p, None))
+        g = J.T @ r
+        return g @ np.linalg.solve(J.T @ J, g), r @ r
+
+    full = solve(200)
+    assert full.result == optx.RESULTS.successful
+    decrement, loss = decrement_and_loss(full.value)
+    assert decrement <= rtol * loss
+    decrement, loss = decrement_and_loss(solve(int(full.stats["num_steps"]) - 1).value)
+    assert decrement > rtol * loss
