@@ -42,7 +42,7 @@ MUTATIONS = (
     Mutation("scipy status 0 (max_nfev reached) reported as converged", "brdffit/fitting/solve.py",
              "(1 if sol.status == 0 else 4)", "(0 if sol.status == 0 else 4)", ("tests/test_fit_status.py",)),
     Mutation("a result worse than the start (fall back to the start) reported as converged", "brdffit/fitting/solve.py",
-             "code = jnp.where(ok | (code != 0), code, 2)", "code = jnp.where(ok | (code != 0), code, 0)",
+             "jnp.where(finite, jnp.where(ok, 0, 2), 3)", "jnp.where(finite, jnp.where(ok, 0, 0), 3)",
              ("tests/test_fit_status.py",)),
     Mutation("atomic_file writes straight to the target: no temporary file, no rename", "brdffit/_files.py",
              "            yield tmp\n            _commit(tmp, path, force)\n        finally:\n            _remove(tmp)\n\n\n"

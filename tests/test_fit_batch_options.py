@@ -120,3 +120,39 @@ def test_lobes_of_one_kind_come_out_narrowest_first_in_a_batch():
         assert r.params["ggx1.alpha"][0] == pytest.approx(0.08, rel=0.05), r.params
         np.testing.assert_allclose(r.params["ggx1.ks"], truth["ggx1.ks"], rtol=0.05)
         assert r.params["ggx2.alpha"][0] == pytest.approx(0.4, rel=0.05), r.params
+
+
+def test_a_batch_records_what_it_solved_in_each_fits_options(two):
+    """``options`` tells how a fit was made: a batch fit says so, and ``starts`` counts the starts
+    solved (1 + multistart; fit's default when multistart is None), as ``fit`` records it."""
+    for multistart in (0, 2, None):
+        rs = fit_batch(two, "ggx", multistart=multistart, max_steps=5)
+        single = fit(two[0], "ggx", multistart=multistart, max_steps=5)
+        want = 1 + (api.default_starts(models.get("ggx")) - 1 if multistart is None else multistart)
+        for r in rs:
+            assert r.options["batch"] is True and r.options["chunk"] == 2
+            assert r.options["starts"] == single.options["starts"] == want, (multistart, r.options)
+            assert r.options["multistart"] == multistart
+
+
+def test_reordered_lobes_carry_their_standard_errors_in_a_batch():
+    """A batch fit started with the lobes the other way round ends at the same optimum, reordered
+    narrowest first: its J'J must be permuted on rows and columns alike, so that its standard
+    errors equal those of the fit started in order (noisy data: standard errors not ~0)."""
+    truth = {"kd": [0.2, 0.2, 0.2], "ggx1.ks": [0.3, 0.3, 0.3], "ggx1.alpha": [0.08], "ggx1.f0": [0.5],
+             "ggx2.ks": [0.2, 0.2, 0.2], "ggx2.alpha": [0.4], "ggx2.f0": [0.5]}
+    swapped = {**truth, "ggx1.ks": truth["ggx2.ks"], "ggx1.alpha": [0.4], "ggx2.ks": truth["ggx1.ks"],
+               "ggx2.alpha": [0.08]}
+    ms = [_measurement(truth, model="lambert+ggx+ggx", n=400, noise=0.02, seed=s) for s in (0, 1)]
+    in_order = fit_batch(ms, "lambert+ggx+ggx", starts=[truth, truth], grid=False)
+    reordered = fit_batch(ms, "lambert+ggx+ggx", starts=[swapped, swapped], grid=False)
+    for a, b in zip(in_order, reordered):
+        assert a.converged and b.converged, (a.status, b.status)
+        assert b.params["ggx1.alpha"][0] < b.params["ggx2.alpha"][0]
+        for name in a.params:
+            np.testing.assert_allclose(b.params[name], a.params[name], rtol=1e-4, err_msg=name)
+            if a.stderr[name] is None:  # at a bound, or not determined: the same in both
+                assert b.stderr[name] is None, name
+            else:
+                np.testing.assert_allclose(b.stderr[name], a.stderr[name], rtol=1e-3, err_msg=name)
+        assert {"ggx1.alpha", "ggx1.ks", "ggx2.alpha", "ggx2.ks"} <= {k for k, v in a.stderr.items() if v is not None}

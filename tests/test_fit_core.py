@@ -450,3 +450,21 @@ def test_excluded_samples_do_not_keep_a_stock_solver_from_stopping(solver):
     without = fit(brdffit.Measurement(m.wi[keep], m.wo[keep], m.values[keep]), "ggx", solver=solver)
     for name in ("kd", "ks", "alpha", "f0"):
         np.testing.assert_allclose(r.params[name], without.params[name], rtol=1e-4)
+
+
+def test_standard_errors_of_a_combination_the_data_do_not_determine_are_none():
+    """kd and ks enter only as their sum (a singular J'J on them): no standard error for either;
+    n, independent of them, keeps its own: sqrt(s^2 / H_nn), s^2 = loss / (n_residuals - 3)."""
+    from brdffit.fitting.api import standard_errors
+    from brdffit.fitting.problem import resolve_model
+
+    model = resolve_model("blinn_phong", 1)  # kd, ks, n: one value each
+    jtj = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 4.0]])
+    se = standard_errors(model, {"kd": [0.2], "ks": [0.5], "n": [30.0]}, jtj, 1.0, 13,
+                         [0.0, 0.0, 1.0], [np.inf, np.inf, np.inf])
+    assert se["kd"] is None and se["ks"] is None
+    np.testing.assert_allclose(se["n"], [np.sqrt(0.1 / 4.0)], rtol=1e-12)
+    jtj[0, 1] = jtj[1, 0] = 0.5  # now determined: all three have one
+    se = standard_errors(model, {"kd": [0.2], "ks": [0.5], "n": [30.0]}, jtj, 1.0, 13,
+                         [0.0, 0.0, 1.0], [np.inf, np.inf, np.inf])
+    np.testing.assert_allclose(se["kd"], [np.sqrt(0.1 * 4.0 / 3.0)], rtol=1e-12)  # (J'J)^-1_00 = 1/(1 - 0.25)
