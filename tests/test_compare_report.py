@@ -26,6 +26,8 @@ def test_to_json_writes_what_it_returns_with_a_final_newline(tmp_path):
 def test_the_jupyter_table_ranks_rows_by_log_loss():
     html = Report(ROWS, "felt")._repr_html_()
     assert "<p><b>felt</b>: 3 fits, ranked by log loss</p>" in html
+    assert ("<table><tr><th>model</th><th>solver</th><th>loss</th><th>n_params</th><th>loss_log</th>"
+            "<th>log_rmse</th><th>run_s</th><th>compile_s</th><th>steps</th><th>converged</th></tr>") in html
     assert html.index("<td>ward</td>") < html.index("<td>ggx</td>") < html.index("<td>lambert</td>")
 
 

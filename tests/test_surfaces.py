@@ -223,3 +223,24 @@ def test_compare_progress():
     assert seen == ["lambert / lm / log"] and len(report.rows) == 1
     # progress=True draws a rich bar (a terminal or a notebook); the fits and rows are the same
     assert len(brdffit.compare(m, ["lambert"], ["lm"], progress=True).rows) == 1
+
+
+def test_compare_progress_bar_names_each_fit_and_ends_full(monkeypatch):
+    """The rich bar's text is the fit running ("fitting model / solver / loss"), then "done" with
+    every fit counted."""
+    import rich.progress
+
+    m = Measurement(*ubo_pairs(), np.full((6561, 3), 0.1), name="flat", grid="ubo81")
+    texts, bars = [], []
+    update = rich.progress.Progress.update
+
+    def record(self, task, **kw):
+        texts.append(kw.get("description"))
+        bars.append(self)
+        return update(self, task, **kw)
+
+    monkeypatch.setattr(rich.progress.Progress, "update", record)
+    brdffit.compare(m, ["lambert"], ["lm", "gauss_newton"], progress=True)
+    assert texts == ["fitting lambert / lm / log", "fitting lambert / gauss_newton / log", "done"]
+    (task,) = bars[-1].tasks
+    assert task.completed == task.total == 2
