@@ -286,3 +286,33 @@ def test_lookup_errors_name_the_known_models_and_what_lobes_applies_to():
     with pytest.raises(KeyError) as err:
         get("ggx", lobes=2)
     assert err.value.args[0] == "lobes= applies to 'lafortune' only, not 'ggx'"
+
+
+@pytest.mark.parametrize("name", ["ggx", "blinn_phong", "oren_nayar"])
+def test_sample_keeps_its_margin_from_both_ends_of_each_axis(name):
+    """``sample(key, margin)`` keeps that fraction of each axis (log axes in log) away from both
+    ends of the finite range: with margin 0.45 every value lies in the middle tenth."""
+    model = get(name)
+    for key in jax.random.split(jax.random.key(1), 8):
+        p = model.sample(key, margin=0.45)
+        for q in model.params:
+            a, b = q.finite_range
+            x = np.asarray(p[q.name], np.float64)
+            if q.scale == "log":
+                a, b, x = np.log(a), np.log(b), np.log(x)
+            u = (x - a) / (b - a)
+            assert np.all((u >= 0.45 - 1e-12) & (u <= 0.55 + 1e-12)), (q.name, u)
+
+
+def test_bounds_written_as_integers_are_floats():
+    """A model file may write ``Param("n", 1, 1, 100, 20, ...)``: its bounds and default are
+    floats, and the model's flat bounds float64, as for every other model."""
+    from brdffit.models.base import Model, Param
+
+    n = Param("n", 1, 1, 100, 20, "exponent", doc="an exponent")
+    assert all(type(v) is float for v in (n.lower, n.upper, n.default)) and n.physical == (1.0, 100.0)
+    model = Model(name="integers", params=(Param("kd", 3, 0, 1, 1, "albedo", linear=True, doc="albedo"), n),
+                  formula=lambda p, wi, wo: p["kd"] / np.pi, citation="none: a test model")
+    lo, hi = model.bounds()
+    assert lo.dtype == hi.dtype == np.float64
+    np.testing.assert_array_equal(hi, [1.0, 1.0, 1.0, 100.0])

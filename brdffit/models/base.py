@@ -102,6 +102,10 @@ class Param:
     def __post_init__(self):
         if self.channels not in (1, 3):
             raise ValueError(f"{self.name}: channels must be 1 or 3")
+        # Floats whatever a model file writes (``Param("n", 1, 1, 100, 20, ...)``): bounds and
+        # defaults become float64 arrays and JAX constants, never integer ones.
+        for field in ("lower", "upper", "default"):
+            object.__setattr__(self, field, float(getattr(self, field)))
         if not (self.lower <= self.default <= self.upper) or math.isnan(self.default):
             raise ValueError(f"{self.name}: default {self.default} outside [{self.lower}, {self.upper}]")
         physical = self.physical
