@@ -158,3 +158,33 @@ def test_device_copy_is_a_private_float64_copy():
     assert out.dtype == np.float64
     np.testing.assert_array_equal(np.asarray(out), np.arange(1000.0))
     assert _common.device_copy([1, 2]).dtype == np.float64
+
+
+def test_a_readers_type_error_is_named_as_a_bad_input(tmp_path, monkeypatch):
+    """A TypeError inside a reader (not one about its keyword options) is the file's problem: one
+    line naming the format, the exception's type and text."""
+    import brdffit
+    from brdffit.errors import InputError
+    from brdffit.io import npz
+
+    path = tmp_path / "t.npz"
+    path.write_bytes(b"anything")
+
+    def broken(p, **options):
+        raise TypeError("unsupported operand type(s) for +: 'int' and\n'str'")
+
+    monkeypatch.setattr(npz, "read", broken)
+    with pytest.raises(InputError) as err:
+        brdffit.load(path)
+    assert str(err.value) == f"{path}: cannot read as npz: TypeError: unsupported operand type(s) for +: 'int' and 'str'"
+
+
+def test_save_names_a_path_without_extension(tmp_path):
+    import brdffit
+
+    m = brdffit.Measurement(*ubo_pairs(), np.full((6561, 3), 0.1))
+    target = tmp_path / "table"
+    with pytest.raises(UsageError) as err:
+        brdffit.save(m, target)
+    assert str(err.value) == f"{target}: cannot write 'files without extension'; use .exr or .npz"
+    assert not target.exists()

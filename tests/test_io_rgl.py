@@ -129,6 +129,11 @@ def test_rgl_lights_at_or_below_the_horizon_give_zero_silently(tmp_path):
     np.testing.assert_allclose(f, expected, rtol=2e-6, atol=0)
     np.testing.assert_allclose(np.asarray(m.values), expected, rtol=2e-6, atol=0)
     assert np.asarray(m.weights).tolist() == [1.0, 0.0, 0.0, 1.0]
+    # what the table says of itself (brdffit info, fit.json's data fields)
+    meta = m.meta
+    assert meta["format"] == "rgl" and meta["fields"] == tuple(sorted(
+        ("description", "jacobian", "theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "rgb", "valid")))
+    assert meta["evaluation"].startswith("mitsuba measured: f_r(light, view) = eval(si.wi=view, wo=light)")
 
 
 def test_rgl_non_finite_value_deep_in_a_2d_field_is_refused(tmp_path):
@@ -286,3 +291,14 @@ def test_rgl_directions_at_the_horizon_get_weight_zero(tmp_path):
     np.testing.assert_array_equal(np.asarray(m.weights), [1.0, 0.0, 0.0])
     np.testing.assert_array_equal(np.asarray(m.values)[1:], 0.0)
     assert np.all(np.asarray(m.values)[0] > 0)
+
+
+def test_check_tensor_file_accepts_phi_from_minus_pi(tmp_path):
+    """RGL's phi_i axes run over -pi..pi or 0..2pi: a first angle of -pi (float32, a hair below
+    it) is within the accepted range."""
+    from brdffit.io.rgl import check_tensor_file
+    from tensor_file import isotropic_material
+
+    p = isotropic_material(tmp_path / "m.bsdf", [0.2, 0.2, 0.2], [0.5, 0.5, 0.5], phi_i=np.array([-np.pi], np.float32))
+    assert float(np.float32(-np.pi)) < -np.pi  # the stored value lies below -pi, by 9e-8
+    assert check_tensor_file(p)["phi_i"] == (10, (1,))
