@@ -242,3 +242,13 @@ def test_metadata_in_full(tmp_path):
     extra = {k: raw.meta[k] for k in ("decoding", "region", "scale", "name")}
     assert extra == {"decoding": "codes taken as linear", "region": (0, 1, 0, 1), "scale": 3.0, "name": "codes"}
     np.testing.assert_allclose(raw.table(), 3.0 * table / 255.0, rtol=1e-12)
+
+
+def test_a_view_folder_at_pv360_is_the_view_at_pv000(tmp_path):
+    """Azimuths agree modulo 360: a view folder written tvTTT_pv360 holds the images named
+    ..._tvTTT_pv000 (the same direction), and the table reads as if the folder said pv000."""
+    table = codes(7)
+    root = write_folder(tmp_path / "v", "png", "views", table)
+    want = np.asarray(brdffit.load(root).values)
+    (root / "tv000_pv000").rename(root / "tv000_pv360")
+    np.testing.assert_array_equal(np.asarray(brdffit.load(root).values), want)
