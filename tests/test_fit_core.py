@@ -15,6 +15,8 @@ from brdffit import models
 from brdffit.errors import UsageError
 from brdffit.fitting import LOSSES, FitResult, compare, fit, fit_batch, select
 from brdffit.fitting import losses as L
+from brdffit.fitting.api import standard_errors
+from brdffit.fitting.problem import resolve_model
 from brdffit.grid import spherical_to_cartesian
 
 TRUE = {"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.25], "f0": [0.3]}
@@ -401,9 +403,6 @@ def test_a_scene_multiplies_the_given_weights():
 def test_standard_errors_count_a_value_within_the_tolerance_as_at_its_bound(side):
     """A value within 1e-9 (relative) of a bound counts as at the bound, on either side, the
     tolerance included; twice as far it does not. v = 1e9 makes the tolerance exactly 1.0."""
-    from brdffit.fitting.api import standard_errors
-    from brdffit.fitting.problem import resolve_model
-
     model = resolve_model("lambert", 1)
     v = 1e9
     tol = 1e-9 * v
@@ -455,9 +454,6 @@ def test_excluded_samples_do_not_keep_a_stock_solver_from_stopping(solver):
 def test_standard_errors_of_a_combination_the_data_do_not_determine_are_none():
     """kd and ks enter only as their sum (a singular J'J on them): no standard error for either;
     n, independent of them, keeps its own: sqrt(s^2 / H_nn), s^2 = loss / (n_residuals - 3)."""
-    from brdffit.fitting.api import standard_errors
-    from brdffit.fitting.problem import resolve_model
-
     model = resolve_model("blinn_phong", 1)  # kd, ks, n: one value each
     jtj = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 4.0]])
     se = standard_errors(model, {"kd": [0.2], "ks": [0.5], "n": [30.0]}, jtj, 1.0, 13,

@@ -225,14 +225,14 @@ def make_solver(name: str, rtol: float, atol: float, normal_equations: Callable 
     """The optimistix solver object behind a solver name (not ``scipy``)."""
     if name == "lm":
         return BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=normal_equations)
-    # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
-    # for rank-deficient systems (SVD).
     # optimistix stops when every |change| < atol + rtol |value|, per residual and per unknown:
     # with atol = 0, a residual or unknown that is exactly 0 and stays so (an excluded sample,
     # weight 0; a parameter held at 0) gives 0/0 = NaN, and the solve never stops (seen: any
     # weight-0 sample ran gauss_newton, dogleg and optx_lm to max_steps). The smallest normal
     # float is no tolerance at all otherwise.
     atol = max(float(atol), float(np.finfo(np.float64).tiny))
+    # Held parameters have zero Jacobian columns: the undamped Gauss-Newton step needs a solver
+    # for rank-deficient systems (SVD).
     if name == "optx_lm":
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     if name == "gauss_newton":
