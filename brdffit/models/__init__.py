@@ -58,7 +58,12 @@ def _get(key: str) -> Model:
     parts = key.split("+")
     if any(not p for p in parts):
         raise KeyError(f"malformed model name {key!r}: empty component")
-    return compose([_one(p, key) for p in parts])
+    components = [_one(p, key) for p in parts]
+    if len(components) > 1 and any(c.is_native for c in components):
+        # a name the user typed: the registry's KeyError, which the CLI reports as bad usage
+        raise KeyError(f"{key!r}: native models ({', '.join(c.name for c in components if c.is_native)}) "
+                       "do not compose with '+'")
+    return compose(components)
 
 
 def get(name: str | Model, *, lobes: int | None = None) -> Model:

@@ -191,6 +191,10 @@ class Model:
     #: lobe's parameters by their base names (floats). None where the model has no specular lobe.
     #: Used to warn about lobes narrower than the sample spacing (``brdffit.fitting.space``).
     halfwidth: Callable[[Mapping[str, float]], float] | None = None
+    #: Native models only (SPEC 13): ``to_native(params) -> dict``, what the renderer or format
+    #: whose BSDF this formula reproduces loads, from checked parameters as float64 NumPy arrays of
+    #: the declared sizes. None for brdffit's own models. See :meth:`native`.
+    to_native: Callable[[Mapping[str, np.ndarray]], dict] | None = None
 
     def __post_init__(self):
         if self.lobes is None:
@@ -256,6 +260,36 @@ class Model:
                 raise ValueError(f"model {self.name!r}: parameter {p.name!r} has shape {v.shape}, expected ({n},)")
             out[p.name] = v
         return out
+
+    # -- native models (SPEC 13) -------------------------------------------------------------------
+    @property
+    def is_native(self) -> bool:
+        """True for a model whose formula is a renderer's or format's own BSDF (``mitsuba:*``,
+        ``gltf:*``, ``blender:*``): it does not compose with ``+`` and exports as that BSDF."""
+        return self.to_native is not None
+
+    @property
+    def target(self) -> str | None:
+        """The renderer or format of a native model: the part of its name before ``:``."""
+        return self.name.split(":", 1)[0] if self.is_native else None
+
+    def native(self, params: Params) -> dict:
+        """What the renderer loads for ``params`` (SPEC 13): for ``mitsuba:*`` a ``mi.load_dict``
+        dictionary of Mitsuba's own plugin, for ``gltf:*`` a glTF 2.0 material object. Raises
+        ValueError for a model that is not native, or parameters outside the bounds (the ranges the
+        renderer accepts)."""
+        if self.to_native is None:
+            raise ValueError(f"model {self.name!r} is not a native model; native models: "
+                             "mitsuba:roughconductor, mitsuba:roughplastic, mitsuba:principled, gltf:metallic_roughness")
+        checked = {k: np.asarray(v, np.float64).reshape(-1) for k, v in self.check_params(params).items()}
+        for p in self.params:
+            v = checked[p.name]
+            if not np.all(np.isfinite(v)) or np.any(v < p.lower) or np.any(v > p.upper):
+                raise ValueError(
+                    f"model {self.name!r}: parameter {p.name!r} = {v.tolist()} outside "
+                    f"{format_range(p.lower, p.upper)}, the range the renderer accepts"
+                )
+        return self.to_native(checked)
 
     # -- evaluation -------------------------------------------------------------------------------
     def eval(self, params: Params, wi: Float[Array, "N 3"], wo: Float[Array, "N 3"]) -> Float[Array, "N C"]:

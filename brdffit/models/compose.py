@@ -90,6 +90,11 @@ def compose(components: Sequence[Model]) -> Model:
         raise ValueError("compose needs at least one model")
     if len(components) == 1:
         return components[0]
+    native = [c.name for c in components if c.is_native]
+    if native:
+        raise ValueError(
+            f"native models do not compose with '+': {', '.join(native)} is a renderer's own BSDF as a whole"
+        )
     diffuse = [i for i, c in enumerate(components) if c.name in DIFFUSE]
     if len(diffuse) > 1:
         raise ValueError(
