@@ -24,8 +24,24 @@ SPEC4 = {
 }
 
 
+# SPEC 13: the native models (a renderer's or format's own BSDF); their parameters are the renderer's.
+SPEC13 = {
+    "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3), ("specular_reflectance", 3)),
+    "mitsuba:roughplastic": (("diffuse_reflectance", 3), ("alpha", 1), ("int_ior", 1), ("specular_reflectance", 3)),
+    "gltf:metallic_roughness": (("base_color", 3), ("metallic", 1), ("roughness", 1)),
+}
+
+
 def test_names_are_spec4():
-    assert names() == sorted(SPEC4)
+    assert names() == sorted([*SPEC4, *SPEC13])
+
+
+@pytest.mark.parametrize("name", sorted(SPEC13))
+def test_native_parameter_table_is_spec13(name):
+    model = get(name)
+    assert model.name == name and model.is_native and model.target == name.split(":")[0]
+    assert tuple((p.name, p.channels) for p in model.params) == SPEC13[name]
+    assert model.citation and model.doc
 
 
 @pytest.mark.parametrize("name", sorted(SPEC4))

@@ -1,4 +1,4 @@
-"""``brdffit export FIT.json [-o FILE]``: the fit as a Mitsuba 3 BSDF, scene-XML (SPEC 8, 10)."""
+"""``brdffit export FIT.json [--to MODEL] [-o FILE]``: the fit as a material file (SPEC 8, 10, 13)."""
 
 from __future__ import annotations
 
@@ -13,36 +13,52 @@ from . import cli
 @cli.command("export")
 @click.argument("fit_json", metavar="FIT.json", type=click.Path(path_type=str))
 @click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None,
-              help="XML file to write [default: standard output].")
-@click.option("--id", "bsdf_id", default=None, help="The BSDF's id in the scene [default: the file name of FIT.json's folder].")
+              help="Material file to write; its extension picks the format: .xml (Mitsuba 3), .glb or .gltf "
+                   "(glTF 2.0) [default: Mitsuba XML on standard output].")
+@click.option("--to", "to", default=None, metavar="MODEL",
+              help="Convert the fit to this native model first (e.g. mitsuba:roughplastic, gltf:metallic_roughness): "
+                   "fitted to the fit's BRDF on the UBO-81 grid; the conversion error is printed and stored in the file.")
+@click.option("--id", "bsdf_id", default=None,
+              help="The material's id (Mitsuba: <ref id=...>; glTF: its name) [default: the file name of FIT.json's folder].")
 @click.option("--force", is_flag=True, help="Replace an existing FILE.")
-def export_cmd(fit_json: str, out: str | None, bsdf_id: str | None, force: bool) -> int:
-    """Write the fit in FIT.json as a Mitsuba 3 scene-XML fragment holding one
-    <bsdf type="brdffit">: include it in a scene with <include filename="FILE"/>, refer to it with
-    <ref id="ID"/>, and load the scene after `import brdffit; brdffit.register_mitsuba()`."""
+def export_cmd(fit_json: str, out: str | None, to: str | None, bsdf_id: str | None, force: bool) -> int:
+    """Write the fit in FIT.json as a material other programs load. A mitsuba:* fit becomes Mitsuba's
+    own plugin (plain Mitsuba loads it); any other fit in .xml is <bsdf type="brdffit"> (load the scene
+    after `import brdffit; brdffit.register_mitsuba()`). A glTF file holds a gltf:metallic_roughness
+    material on a UV sphere. Include an XML fragment in a scene with <include filename="FILE"/> and
+    refer to it with <ref id="ID"/>."""
     from .._files import atomic_file, check_target
     from ..errors import InputError, UsageError
     from ..fitting.result import FitResult
-    from ..render.export import bsdf_xml
+    from ..materials import check_format, conversion_line, convert, material_bytes
 
     path = Path(fit_json)
     if not path.is_file():
         raise InputError(fit_json, "no such file")
-    if out is not None:
-        check_target(out, force)  # before any work: nothing is written on bad usage
     fit = FitResult.from_json(path)
+    ext = check_format(fit, out if out is not None else "stdout.xml", to, source=fit_json)
+    if out is not None:
+        check_target(out, force, folder=False)  # before any work: nothing is written on bad usage
     if bsdf_id is None:
         parent = path.resolve().parent.name
         bsdf_id = re.sub(r"[^A-Za-z0-9_]", "_", parent if path.stem == "fit" and parent else path.stem) or "brdffit"
     elif not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", bsdf_id):
         raise UsageError(f"--id {bsdf_id!r}: use letters, digits and '_' (Mitsuba ids cannot hold '.')")
-    text = bsdf_xml(fit, bsdf_id=bsdf_id)
     if not fit.converged:
-        click.echo(f"brdffit: {fit_json}: the fit did not converge (exported anyway, marked in the XML)", err=True)
+        click.echo(f"brdffit: {fit_json}: the fit did not converge (exported anyway, marked in the file)", err=True)
+    if to is not None:
+        fit = convert(fit, to)
+        click.echo(f"brdffit: {conversion_line(fit) or f'{fit.model.name}: nothing to convert'}", err=True)
+        if not fit.converged:
+            click.echo(f"brdffit: the conversion to {fit.model.name} did not converge ({fit.status}); exported anyway",
+                       err=True)
+    data = material_bytes(fit, ext, bsdf_id)
     if out is None:
-        click.echo(text, nl=False)
+        click.echo(data.decode(), nl=False)
         return 0
     with atomic_file(out, force=force) as tmp:
-        tmp.write_text(text)
-    click.echo(f"wrote {out}: <bsdf type=\"brdffit\" id=\"{bsdf_id}\"> ({fit.model.name})", err=True)
+        tmp.write_bytes(data)
+    what = "Mitsuba's own plugin" if ext == ".xml" and fit.model.target == "mitsuba" else (
+        '<bsdf type="brdffit">' if ext == ".xml" else "a UV sphere with the material")
+    click.echo(f"wrote {out}: {what}, id {bsdf_id!r} ({fit.model.name})", err=True)
     return 0

@@ -131,12 +131,29 @@ class FitResult:
         )
 
     def to_mitsuba(self) -> dict:
-        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene, with the same
-        JAX formula (SPEC 8; see :mod:`brdffit.render.export`). Render such scenes inside
-        ``with brdffit.evaluated_calls():``."""
+        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (SPEC 8): for
+        a ``mitsuba:*`` fit Mitsuba's own plugin (``model.native``), otherwise the ``brdffit`` plugin
+        with the same JAX formula (see :mod:`brdffit.render.export`)."""
         from ..render.export import mitsuba_bsdf
 
         return mitsuba_bsdf(self)
+
+    def convert(self, model: str | Model, **options) -> "FitResult":
+        """This fit as ``model`` (a native model: ``mitsuba:roughplastic``, ``gltf:metallic_roughness``,
+        ...): ``model`` fitted to this fit's BRDF on the UBO-81 grid, the conversion error in
+        ``options["converted_from"]`` (SPEC 13; :func:`brdffit.materials.convert`)."""
+        from ..materials import convert
+
+        return convert(self, model, **options)
+
+    def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
+               force: bool = False) -> "FitResult":
+        """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
+        ``.glb``/``.gltf`` glTF 2.0 (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
+        fit is converted first; returns the fit written."""
+        from ..materials import export
+
+        return export(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id, force=force)
 
     # -- JSON -------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

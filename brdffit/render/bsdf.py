@@ -326,6 +326,10 @@ class Source:
         if self._bsdf is None:
             if self.kind == "rgl":
                 self._bsdf = measured_bsdf(self.path)
+            elif self.model is not None and self.model.target == "mitsuba":
+                # a native fit renders with Mitsuba's own plugin: what is validated is what the user
+                # will render (the JAX formula equals it: tests/test_native_models.py)
+                self._bsdf = mitsuba().load_dict(self.model.native(self.params))
             else:
                 from .sampling import Mixture
 

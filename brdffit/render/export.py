@@ -175,6 +175,8 @@ def mitsuba_bsdf(model_or_fit, params=None):
     if not hasattr(model_or_fit, "params") and _is_map(params):
         return map_bsdf(model_or_fit, params)
     model, values = _model_and_params(model_or_fit, params)
+    if model.target == "mitsuba":  # a native fit is Mitsuba's own plugin (SPEC 8, 13)
+        return model.native(values)
     register_mitsuba()
     out: dict = {"type": PLUGIN, "model": model.name}
     if model.channels != 3:

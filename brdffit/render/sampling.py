@@ -96,6 +96,13 @@ def _base_lobes(name: str, p, q) -> list[Lobe]:
         return [Lobe("cosine", scales=s("kd"))] + [
             Lobe("power", (p("n" + x), p("cx" + x), p("cz" + x)), s("rho" + x)) for x in suffixes
         ]
+    if name in ("mitsuba:roughconductor", "mitsuba:roughplastic"):
+        a = p("alpha")
+        diffuse = [Lobe("cosine", scales=s("diffuse_reflectance"))] if q("diffuse_reflectance") else []
+        return diffuse + [Lobe("ggx", (a, a), s("specular_reflectance"))]
+    if name == "gltf:metallic_roughness":
+        a = p("roughness") ** 2  # glTF's alpha; the diffuse share is what base_color adds
+        return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0)]
     return [Lobe("cosine", scales=s("kd"))]  # an unknown model: cosine sampling (valid, not fast)
 
 

@@ -43,7 +43,10 @@ def scene_name(scene) -> str:
 
 def load_scene(scene, material: str) -> LoadedScene:
     """Load ``scene`` and find ``material`` in it (InputError naming the scene when it is not there)."""
+    from ..render.export import register_mitsuba
+
     mi = mitsuba()
+    register_mitsuba()  # a scene may hold a fit exported as <bsdf type="brdffit"> (SPEC 8)
     name = scene_name(scene)
     if isinstance(scene, (str, Path)):
         path = Path(scene)

@@ -1,0 +1,179 @@
+"""Mitsuba 3's own building blocks, in JAX, for the ``mitsuba:*`` native models (SPEC 13).
+
+Each function reproduces a named piece of Mitsuba 3 (``include/mitsuba/render/fresnel.h``,
+``microfacet.h``, ``src/bsdfs/roughplastic.cpp``) term for term, so that a native model equals the
+plugin the user renders with; the tests hold every model equal to Mitsuba's ``bsdf.eval``
+(tests/test_native_models.py). Written for the isotropic GGX distribution with visible-normal
+sampling, the only setting the native models write.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax.numpy as jnp
+import numpy as np
+
+from . import _math as m
+
+#: Entries of roughplastic's precomputed external transmittance table over cos theta in [0, 1]
+#: (Mitsuba's MI_ROUGH_TRANSMITTANCE_RES).
+TRANSMITTANCE_RES = 64
+
+
+def fresnel_conductor(cos_theta_i, eta, k):
+    """Unpolarised Fresnel reflectance of a conductor with complex IOR eta + i k (Mitsuba's
+    ``fresnel_conductor``, after Moeller's "Optics"), cos_theta_i in [0, 1]."""
+    c2 = cos_theta_i * cos_theta_i
+    s2 = 1.0 - c2
+    s4 = s2 * s2
+    temp1 = eta * eta - k * k - s2
+    a2pb2 = m.safe_sqrt(temp1 * temp1 + 4.0 * k * k * eta * eta)
+    a = m.safe_sqrt(0.5 * (a2pb2 + temp1))
+    term1 = a2pb2 + c2
+    term2 = 2.0 * cos_theta_i * a
+    r_s = (term1 - term2) / (term1 + term2)
+    term3 = a2pb2 * c2 + s4
+    term4 = term2 * s2
+    r_p = r_s * (term3 - term4) / (term3 + term4)
+    return 0.5 * (r_s + r_p)
+
+
+def fresnel_dielectric(cos_theta_i, eta):
+    """Mitsuba's ``fresnel(cos_theta_i, eta)`` for a real relative IOR ``eta`` (eta != 1): the
+    unpolarised reflectance, the signed cosine of the refracted ray and eta_ti; total internal
+    reflection gives r = 1."""
+    outside = cos_theta_i >= 0.0
+    eta_it = jnp.where(outside, eta, 1.0 / eta)
+    eta_ti = jnp.where(outside, 1.0 / eta, eta)
+    cos_t_sqr = 1.0 - (1.0 - cos_theta_i * cos_theta_i) * eta_ti * eta_ti
+    ci = jnp.abs(cos_theta_i)
+    ct = m.safe_sqrt(cos_t_sqr)
+    a_s = (ci - eta_it * ct) / (ci + eta_it * ct)
+    a_p = (ct - eta_it * ci) / (ct + eta_it * ci)
+    r = 0.5 * (a_s * a_s + a_p * a_p)
+    r = jnp.where(ci == 0.0, 1.0, r)
+    cos_t = jnp.where(cos_theta_i >= 0.0, -ct, ct)
+    return r, cos_t, eta_ti
+
+
+def ggx_d(h, alpha):
+    """Mitsuba's GGX ``eval(m)`` (isotropic): alpha^2 / (pi (sin^2 + alpha^2 cos^2)^2), in the form
+    that stays exact at small alpha (equal to ``brdffit.models.ggx.ggx_ndf``)."""
+    sin2, cos2 = m.sin2_cos2_theta(h)
+    a2 = alpha * alpha
+    return a2 / (jnp.pi * (cos2 * a2 + sin2) ** 2)
+
+
+def smith_g1(v, h, alpha):
+    """Mitsuba's GGX ``smith_g1(v, m)``: 2 / (1 + sqrt(1 + alpha^2 tan^2 theta_v)), 1 at normal
+    incidence, 0 where v sees the back of the microfacet m."""
+    g = 2.0 / (1.0 + jnp.sqrt(1.0 + alpha * alpha * m.tan2_theta(v)))
+    back = m.dot(v, h) * v[..., 2:3] <= 0.0
+    return jnp.where(back, 0.0, g)
+
+
+# -- roughplastic's precomputed tables ----------------------------------------------------------
+
+def _concentric_disk(u):
+    """Mitsuba's ``square_to_uniform_disk_concentric`` of points u in [0, 1]^2 (..., 2)."""
+    x = 2.0 * u[..., 0] - 1.0
+    y = 2.0 * u[..., 1] - 1.0
+    q13 = np.abs(x) < np.abs(y)
+    r = np.where(q13, y, x)
+    rp = np.where(q13, x, y)
+    safe_r = np.where(r == 0.0, 1.0, r)
+    phi = 0.25 * np.pi * rp / safe_r
+    phi = np.where(q13, 0.5 * np.pi - phi, phi)
+    phi = np.where((x == 0.0) & (y == 0.0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+@functools.lru_cache(maxsize=None)
+def _quadrature(res: int):
+    """Mitsuba's quadrature of ``eval_reflectance`` / ``eval_transmittance``: a res x res
+    Gauss-Legendre grid on [0, 1]^2, its points through the concentric disk map (the first step of
+    visible-normal sampling, independent of the parameters), and weights w_x w_y / 4."""
+    nodes, weights = np.polynomial.legendre.leggauss(res)
+    nx, ny = np.meshgrid(nodes, nodes)
+    wx, wy = np.meshgrid(weights, weights)
+    u = np.stack([0.5 * nx.ravel() + 0.5, 0.5 * ny.ravel() + 0.5], -1)
+    px, py = _concentric_disk(u)
+    return px, py, (wx * wy).ravel() * 0.25
+
+
+def _vndf_normals(mu, alpha, px, py):
+    """Microfacet normals (T, Q, 3) that Mitsuba's GGX visible-normal sampling (``sample``, the
+    Heitz-d'Eon 2014 method) draws for the directions wi = (sqrt(1 - mu^2), 0, mu) (T,) at the disk
+    points (px, py) (Q,); wi lies in the x-z plane, so phi = 0 after stretching."""
+    cos_i = mu[:, None]
+    sin_i = jnp.sqrt(jnp.maximum(1.0 - mu * mu, 0.0))[:, None]
+    # step 1: stretch wi; it stays in the x-z plane (phi = 0 where sin theta > 0)
+    sx, sz = alpha * sin_i, cos_i
+    norm = jnp.sqrt(sx * sx + sz * sz)
+    cos_t, sin_t = sz / norm, sx / norm
+    # step 2: sample_visible_11
+    s = 0.5 * (1.0 + cos_t)
+    ppy = (1.0 - s) * jnp.sqrt(jnp.maximum(1.0 - px * px, 0.0)) + s * py
+    z = jnp.sqrt(jnp.maximum(1.0 - (px * px + ppy * ppy), 0.0))
+    inv = 1.0 / (sin_t * ppy + cos_t * z)
+    slope_x = (cos_t * ppy - sin_t * z) * inv
+    slope_y = px * inv
+    # step 3: rotate (phi = 0: identity) and unstretch; step 4: the normal
+    nx, ny = -slope_x * alpha, -slope_y * alpha
+    nn = jnp.sqrt(nx * nx + ny * ny + 1.0)
+    return jnp.stack([nx / nn, ny / nn, jnp.broadcast_to(1.0 / nn, nx.shape)], -1)
+
+
+def _table_directions(n: int = TRANSMITTANCE_RES):
+    mu = np.maximum(1e-6, np.linspace(0.0, 1.0, n))
+    wi = np.stack([np.sqrt(1.0 - mu * mu), np.zeros(n), mu], -1)
+    return mu, wi
+
+
+def _constants(res: int, dtype):
+    """The table directions and the quadrature, in the parameters' dtype (float32 stays float32)."""
+    mu, wi = _table_directions()
+    px, py, w = _quadrature(res)
+    return tuple(jnp.asarray(a, dtype) for a in (mu, wi, px, py, w))
+
+
+def external_transmittance(alpha, eta):
+    """roughplastic's ``m_external_transmittance`` (TRANSMITTANCE_RES,): the fraction of light
+    from each table direction transmitted through the rough dielectric interface of relative IOR
+    ``eta`` > 1 (Mitsuba's ``eval_transmittance``, 32 x 32 nodes for eta > 1)."""
+    mu, wi, px, py, w = _constants(32, alpha.dtype)
+    mvec = _vndf_normals(mu, alpha, px, py)  # (T, Q, 3)
+    wi_b = wi[:, None, :]
+    cos_im = jnp.sum(wi_b * mvec, axis=-1, keepdims=True)
+    f, cos_t, eta_ti = fresnel_dielectric(cos_im, eta)
+    wo = mvec * (cos_im * eta_ti + cos_t) - wi_b * eta_ti  # Mitsuba's refract
+    g = smith_g1(wo, mvec, alpha) * (1.0 - f)
+    g = jnp.where(wo[..., 2:3] * wi_b[..., 2:3] >= 0.0, 0.0, g)
+    return jnp.sum(g[..., 0] * w, axis=-1)
+
+
+def internal_reflectance(alpha, eta):
+    """roughplastic's ``m_internal_reflectance``: the hemispherical reflectance seen from inside
+    the layer, 2 mean(R(wi, 1/eta) cos theta_i) over the table directions (Mitsuba's
+    ``eval_reflectance``, 128 x 128 nodes for 1/eta < 1)."""
+    mu, wi, px, py, w = _constants(128, alpha.dtype)
+    mvec = _vndf_normals(mu, alpha, px, py)
+    wi_b = wi[:, None, :]
+    cos_im = jnp.sum(wi_b * mvec, axis=-1, keepdims=True)
+    f, _, _ = fresnel_dielectric(cos_im, 1.0 / eta)
+    wo = 2.0 * cos_im * mvec - wi_b  # Mitsuba's reflect(wi, m)
+    g = smith_g1(wo, mvec, alpha) * f
+    g = jnp.where(wo[..., 2:3] <= 0.0, 0.0, g)
+    r = jnp.sum(g[..., 0] * w, axis=-1)
+    return 2.0 * jnp.mean(r * mu)
+
+
+def lerp_table(table, x):
+    """Mitsuba's ``lerp_gather``: linear interpolation of a table over [0, 1] at x (..., 1)."""
+    n = table.shape[0]
+    t = x * (n - 1)
+    index = jnp.clip(jnp.floor(t), 0, n - 2).astype(jnp.int32)
+    v0 = table[index]
+    v1 = table[index + 1]
+    return v0 + (v1 - v0) * (t - index)

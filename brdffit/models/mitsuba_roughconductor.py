@@ -1,0 +1,87 @@
+"""Mitsuba 3's ``roughconductor`` plugin (GGX), as a native model (SPEC 13).
+
+W. Jakob et al., Mitsuba 3 renderer, ``src/bsdfs/roughconductor.cpp`` (2022-); B. Walter,
+S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refraction through Rough Surfaces",
+EGSR 2007; conductor Fresnel after K. D. Moeller, "Optics", 1988.
+
+Parameters
+----------
+====================  ========  =================  ===========  =======  ==========  ============================================
+name                  channels  bounds             physical     default  role        meaning
+====================  ========  =================  ===========  =======  ==========  ============================================
+alpha                 1         [1e-4, 1] (log)    [1e-4, 1]    0.1      roughness   GGX roughness (the plugin's ``alpha``)
+eta                   3         [0.01, 10] (log)   [0.01, 10]   0.2      fresnel     real part of the complex IOR (``eta``)
+k                     3         [0, 20]            [0, 20]      3        fresnel     imaginary part, extinction (``k``)
+specular_reflectance  3         [0, 1]             [0, 1]       1        albedo      the plugin's ``specular_reflectance`` (linear)
+====================  ========  =================  ===========  =======  ==========  ============================================
+
+f_r = specular_reflectance F(h.l; eta + i k) D(h) G1(l, h) G1(v, h) / (4 (n.l)(n.v))
+
+with Mitsuba's isotropic GGX D, its separable Smith G1 and its exact conductor Fresnel; no diffuse
+term. Mitsuba's ``eval`` returns f_r (n.l) (with si.wi the view): this formula equals it
+(tests/test_native_models.py). ``native()`` writes every setting the formula relies on: the plugin's
+default distribution is Beckmann (9.6 % off GGX at alpha 0.3), so ``distribution`` is always
+``ggx``; ``eta``/``k`` are written as RGB values, so no ``material`` preset applies.
+
+Bounds: what Mitsuba accepts and the formula needs (alpha > 0; eta and k cover every metal of
+Mitsuba's IOR list in RGB; a reflectance scale in [0, 1], which Mitsuba requires).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+
+from . import _math as m
+from ._mitsuba_math import fresnel_conductor, ggx_d, smith_g1
+from .base import Lobe, Model, Param
+
+PARAMS = (
+    Param("alpha", 1, 1e-4, 1.0, 0.1, "roughness", doc="GGX roughness (Mitsuba alpha)"),
+    Param("eta", 3, 0.01, 10.0, 0.2, "fresnel", doc="real part of the complex index of refraction"),
+    Param("k", 3, 0.0, 20.0, 3.0, "fresnel", doc="imaginary part of the complex index of refraction"),
+    Param("specular_reflectance", 3, 0.0, 1.0, 1.0, "albedo", linear=True, doc="reflectance scale"),
+)
+
+
+def formula(p, wi, wo):
+    h = m.half_vector(wi, wo)
+    alpha = p["alpha"]
+    d = ggx_d(h, alpha)
+    g = smith_g1(wi, h, alpha) * smith_g1(wo, h, alpha)
+    f = fresnel_conductor(jnp.clip(m.dot(wo, h), 0.0, 1.0), p["eta"], p["k"])
+    return p["specular_reflectance"] * f * d * g / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
+
+
+def halfwidth(p):
+    """As ``ggx``: twice the half-vector angle where D falls to half its peak."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+
+
+def to_native(p) -> dict:
+    def rgb(v):
+        return {"type": "rgb", "value": [float(x) for x in v]}
+
+    return {
+        "type": "roughconductor",
+        "distribution": "ggx",
+        "alpha": float(p["alpha"][0]),
+        "eta": rgb(p["eta"]),
+        "k": rgb(p["k"]),
+        "specular_reflectance": rgb(p["specular_reflectance"]),
+    }
+
+
+MODEL = Model(
+    name="mitsuba:roughconductor",
+    params=PARAMS,
+    formula=formula,
+    citation="Mitsuba 3 roughconductor (GGX); Walter, Marschner, Li, Torrance: Microfacet Models for "
+             "Refraction through Rough Surfaces, EGSR 2007",
+    reciprocal=True,
+    doc=__doc__,
+    lobes=(Lobe("mitsuba:roughconductor", ("alpha", "eta", "k", "specular_reflectance")),),
+    halfwidth=halfwidth,
+    to_native=to_native,
+)
