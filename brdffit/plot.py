@@ -172,6 +172,21 @@ def _sym_limit(d: np.ndarray) -> float:
     return lim if lim > 0 else 1e-12
 
 
+def _sym_norm(d: np.ndarray):
+    """A symmetric colour scale that shows the whole error range: linear up to the largest |error|
+    when that is within 4x of the 99.5th percentile, otherwise linear up to the percentile and
+    logarithmic beyond it (SymLogNorm), so that a few large errors neither vanish off the scale
+    nor wash out the rest."""
+    import matplotlib.colors
+
+    typical = _sym_limit(d)
+    a = np.abs(d[np.isfinite(d)])
+    top = max(float(a.max()) if a.size else 0.0, typical)
+    if top <= 4.0 * typical:
+        return matplotlib.colors.Normalize(vmin=-top, vmax=top)
+    return matplotlib.colors.SymLogNorm(linthresh=typical, linscale=1.0, vmin=-top, vmax=top, base=10)
+
+
 def _ring_ticks(ax, light_axis: bool = True, view_axis: bool = True) -> None:
     """Ticks at the centre of every theta ring of the UBO-81 ordering, lines between rings.
     ``light_axis=False``: no light-ring ticks or label, for a panel right of one that has them
@@ -329,11 +344,11 @@ def _draw_compare_table(ref, fitted, valid, residual, rmse: float, log_rmse: flo
         text_x = _LEFT + 2 * _PANEL + _GAP + _BAR_PAD + _BAR_W + _BAR_LABEL
         fig.text(text_x / fig.get_size_inches()[0], (top_y + _PANEL) / fig.get_size_inches()[1],
                  summary, fontsize=8, va="top", ha="left", family="monospace")
-    lim = _sym_limit(residual)
+    norm = _sym_norm(residual)
     cmap = _diverging()
     for c, name in enumerate(names):
         ax = _inch_axes(fig, _LEFT + c * (_PANEL + _GAP), _X_AXIS, _PANEL, _PANEL)
-        im = ax.imshow(residual[..., c], cmap=cmap, vmin=-lim, vmax=lim, interpolation="nearest")
+        im = ax.imshow(residual[..., c], cmap=cmap, norm=norm, interpolation="nearest")
         ax.set_title(f"{name}: fitted − measured (log residual)", fontsize=9)
         _ring_ticks(ax, light_axis=c == 0)
     cb = fig.colorbar(im, cax=_inch_axes(fig, _LEFT + len(names) * (_PANEL + _GAP) - _GAP + _BAR_PAD, _X_AXIS,
@@ -577,7 +592,7 @@ def sphere_panel(reference, fit, light, *, metrics: dict | None = None, scale: f
     scale = exposure(ref) if scale is None else scale
     size = ref.shape[0]
     d = tst - ref
-    lim = _sym_limit(d)
+    norm = _sym_norm(d)
     fig = _figure((15.5, 3.6), layout="constrained")
     axes = fig.subplots(1, 5)
     axes[0].imshow(tonemap(ref, scale), interpolation="nearest")
@@ -589,7 +604,7 @@ def sphere_panel(reference, fit, light, *, metrics: dict | None = None, scale: f
     light = np.asarray(light, np.float64)
     for c, name in enumerate(("R", "G", "B")):
         ax = axes[2 + c]
-        im = ax.imshow(d[..., c], cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+        im = ax.imshow(d[..., c], cmap="RdBu_r", norm=norm, interpolation="nearest")
         ax.set_title(f"{name}: fit − reference", fontsize=9)
         ax.plot(c0 + size / 2 * np.cos(t), c0 + size / 2 * np.sin(t), color="0.6", lw=0.6)
         # where the light direction projects onto the image (the normal facing the light)

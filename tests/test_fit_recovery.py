@@ -57,6 +57,11 @@ RANGES: dict[str, dict[str, tuple]] = {
     "ggx": {"kd": ALB, "ks": (0.3, 1.0), "alpha": ROUGH, "f0": (0.05, 0.6)},
     "lafortune": {"kd": ALB, "rho": (0.5, 5.0), "cx": (-1.0, -0.6), "cz": (0.6, 1.0), "n": (5.0, 60.0, LOG)},
     "ashikhmin_shirley": {"rd": ALB, "rs": (0.05, 0.5), "nu": (5.0, 100.0, LOG), "nv": (5.0, 100.0, LOG)},
+    # native models (SPEC 13): the renderer's parameters
+    "mitsuba:roughconductor": {"alpha": ROUGH, "eta": (0.2, 2.0), "k": (1.0, 5.0)},
+    "mitsuba:roughplastic": {"diffuse_reflectance": ALB, "alpha": ROUGH, "int_ior": (1.3, 2.0),
+                             "specular_reflectance": (0.5, 1.0)},
+    "gltf:metallic_roughness": {"base_color": (0.2, 0.9), "metallic": (0.1, 0.9), "roughness": (0.3, 0.7)},
 }
 
 #: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run.
@@ -67,6 +72,11 @@ KNOWN_FAILURES: dict[tuple[str, int], str] = {
     # draw (a fit started at the truth ends at the same loss, 3.69707e-7, and n = 35.92), but there
     # n is 1.9 % and blue rho cz^n 2.2 % from the truth.
     ("lafortune", 2): "the noise draw's minimum lies 2.2 % from the truth in blue rho cz^n (a fit from the truth ends there too)",
+    # A solver-start gap, left open (issue 27's closing note): the default start's grid gives eta and
+    # k three shared values each, and these fits converge in another (eta, k) valley of a channel
+    # (k = 0 there) whose Fresnel curve matches at the grid's angles only: rel_rmse 0.099 and 0.043.
+    ("mitsuba:roughconductor", 0): "default start: converged in another (eta, k) valley (rel_rmse 0.099)",
+    ("mitsuba:roughconductor", 1): "default start: converged in another (eta, k) valley (rel_rmse 0.043)",
 }
 
 
@@ -86,7 +96,20 @@ def truth(name: str, k: int) -> dict[str, np.ndarray]:
 
 
 def _compared(name: str, params: dict) -> dict[str, np.ndarray]:
-    """The quantities the data identify: the parameters themselves, except Lafortune's degeneracy."""
+    """The quantities the data identify: the parameters themselves, except Lafortune's degeneracy
+    and the conductor's complex IOR, which the data see only through its Fresnel curve (compared at
+    0, 30 and 60 degrees, Fresnel's formula by Moeller written again here)."""
+    if name == "mitsuba:roughconductor":
+        eta, k = (np.asarray(params[x], np.float64) for x in ("eta", "k"))
+        out = {"alpha": np.asarray(params["alpha"], np.float64)}
+        for deg in (0, 30, 60):
+            c = math.cos(math.radians(deg))
+            n2 = (eta + 1j * k) ** 2
+            root = np.sqrt(n2 - (1 - c * c))
+            rs = np.abs((c - root) / (c + root)) ** 2
+            rp = np.abs((n2 * c - root) / (n2 * c + root)) ** 2
+            out[f"F({deg})"] = 0.5 * (rs + rp)
+        return out
     if name != "lafortune":
         return {k: np.asarray(v, np.float64) for k, v in params.items()}
     cx, cz, n, rho = (np.asarray(params[k], np.float64) for k in ("cx", "cz", "n", "rho"))

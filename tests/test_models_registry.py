@@ -26,7 +26,7 @@ SPEC4 = {
 
 # SPEC 13: the native models (a renderer's or format's own BSDF); their parameters are the renderer's.
 SPEC13 = {
-    "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3), ("specular_reflectance", 3)),
+    "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3)),
     "mitsuba:roughplastic": (("diffuse_reflectance", 3), ("alpha", 1), ("int_ior", 1), ("specular_reflectance", 3)),
     "gltf:metallic_roughness": (("base_color", 3), ("metallic", 1), ("roughness", 1)),
 }

@@ -65,6 +65,13 @@ def test_default_bounds_only_where_the_formula_needs_them():
         for p in models.get(name).params:
             assert all(math.isfinite(v) for v in p.physical), (name, p.name)
             assert p.lower <= p.physical[0] <= p.default <= p.physical[1] <= p.upper
+            if models.get(name).is_native:
+                # SPEC 13: a native model's bounds are the ranges its renderer accepts (finite:
+                # Mitsuba refuses reflectances above 1), so every native fit exports as it is
+                assert math.isfinite(p.lower) and math.isfinite(p.upper), (name, p.name)
+                if p.linear:
+                    assert (p.lower, p.upper) == (0.0, 1.0), (name, p.name)
+                continue
             if p.linear:
                 assert (p.lower, p.upper) == (0.0, INF), (name, p.name)
             if p.role in ("roughness", "exponent") and name != "oren_nayar":

@@ -84,13 +84,32 @@ def test_error_range_follows_the_data():
     _, _, f_fit = ggx_values({**GGX, "kd": [0.301, 0.25, 0.2]})
     cos = wi[:, 2:3]
     residual = np.log1p(f_fit * cos) - np.log1p(f_ref * cos)
-    expected = np.percentile(np.abs(residual), 99.5)
+    expected = np.abs(residual).max()  # the whole range of the errors (issue 27: not a percentile)
     errors = [im for im in images(fig) if im.get_array().ndim == 2]
     assert len(errors) == 3
     for im in errors:
         lo, hi = im.get_clim()
         assert lo == -hi
         np.testing.assert_allclose(hi, expected, rtol=1e-9)  # not the fixed +-1 of before
+
+
+def test_error_scale_reaches_the_largest_error():
+    """A few errors far above the rest (a fit that misses a peak by x20) stay on the scale: the
+    colour bar runs to the largest error, logarithmic beyond the 99.5th percentile (issue 27: it
+    stopped at +-0.25 while errors reached 20)."""
+    import matplotlib.colors
+
+    n = 32
+    ref = np.full((n, n, 3), 0.1)
+    fit = ref + 0.01 * np.sin(np.arange(n * n * 3)).reshape(n, n, 3)
+    fit[3, 4] += 20.0  # one pixel far off
+    fig = bp.sphere_panel(ref, fit, np.array([0.0, 0.0, 1.0]))
+    ims = [ax.get_images()[0] for ax in fig.axes if ax.get_title().endswith("fit − reference")]
+    for im in ims:
+        lo, hi = im.get_clim()
+        assert hi == pytest.approx(np.abs(fit - ref).max()) and lo == -hi
+        assert isinstance(im.norm, matplotlib.colors.SymLogNorm)
+        assert im.norm.linthresh == pytest.approx(np.percentile(np.abs(fit - ref), 99.5))
 
 
 # -- defect 9: colour (per-channel) error maps, R/G/B labels -----------------------------------------

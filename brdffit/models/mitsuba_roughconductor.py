@@ -12,19 +12,22 @@ name                  channels  bounds             physical     default  role   
 alpha                 1         [1e-4, 1] (log)    [1e-4, 1]    0.1      roughness   GGX roughness (the plugin's ``alpha``)
 eta                   3         [0.01, 10] (log)   [0.01, 10]   0.2      fresnel     real part of the complex IOR (``eta``)
 k                     3         [0, 20]            [0, 20]      3        fresnel     imaginary part, extinction (``k``)
-specular_reflectance  3         [0, 1]             [0, 1]       1        albedo      the plugin's ``specular_reflectance`` (linear)
 ====================  ========  =================  ===========  =======  ==========  ============================================
 
-f_r = specular_reflectance F(h.l; eta + i k) D(h) G1(l, h) G1(v, h) / (4 (n.l)(n.v))
+f_r = F(h.l; eta + i k) D(h) G1(l, h) G1(v, h) / (4 (n.l)(n.v))
 
 with Mitsuba's isotropic GGX D, its separable Smith G1 and its exact conductor Fresnel; no diffuse
 term. Mitsuba's ``eval`` returns f_r (n.l) (with si.wi the view): this formula equals it
 (tests/test_native_models.py). ``native()`` writes every setting the formula relies on: the plugin's
 default distribution is Beckmann (9.6 % off GGX at alpha 0.3), so ``distribution`` is always
 ``ggx``; ``eta``/``k`` are written as RGB values, so no ``material`` preset applies.
+``specular_reflectance`` is not fitted and keeps the plugin's default, 1 (SPEC 13): the complex IOR
+alone spans every reflectance curve a scale would, and a scale beside it leaves the fit a flat
+direction (s F(eta, k) = s' F(eta', k') along a curve; measured: no 2 % recovery of eta, k or s, and
+a lm run that ended worse than its start).
 
 Bounds: what Mitsuba accepts and the formula needs (alpha > 0; eta and k cover every metal of
-Mitsuba's IOR list in RGB; a reflectance scale in [0, 1], which Mitsuba requires).
+Mitsuba's IOR list in RGB).
 """
 
 from __future__ import annotations
@@ -41,7 +44,6 @@ PARAMS = (
     Param("alpha", 1, 1e-4, 1.0, 0.1, "roughness", doc="GGX roughness (Mitsuba alpha)"),
     Param("eta", 3, 0.01, 10.0, 0.2, "fresnel", doc="real part of the complex index of refraction"),
     Param("k", 3, 0.0, 20.0, 3.0, "fresnel", doc="imaginary part of the complex index of refraction"),
-    Param("specular_reflectance", 3, 0.0, 1.0, 1.0, "albedo", linear=True, doc="reflectance scale"),
 )
 
 
@@ -51,7 +53,7 @@ def formula(p, wi, wo):
     d = ggx_d(h, alpha)
     g = smith_g1(wi, h, alpha) * smith_g1(wo, h, alpha)
     f = fresnel_conductor(jnp.clip(m.dot(wo, h), 0.0, 1.0), p["eta"], p["k"])
-    return p["specular_reflectance"] * f * d * g / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
+    return f * d * g / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
 
 
 def halfwidth(p):
@@ -69,7 +71,7 @@ def to_native(p) -> dict:
         "alpha": float(p["alpha"][0]),
         "eta": rgb(p["eta"]),
         "k": rgb(p["k"]),
-        "specular_reflectance": rgb(p["specular_reflectance"]),
+        "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},  # the plugin's default, written
     }
 
 
@@ -81,7 +83,7 @@ MODEL = Model(
              "Refraction through Rough Surfaces, EGSR 2007",
     reciprocal=True,
     doc=__doc__,
-    lobes=(Lobe("mitsuba:roughconductor", ("alpha", "eta", "k", "specular_reflectance")),),
+    lobes=(Lobe("mitsuba:roughconductor", ("alpha", "eta", "k")),),
     halfwidth=halfwidth,
     to_native=to_native,
 )

@@ -1,8 +1,10 @@
 """A fit in any Mitsuba 3 scene (SPEC 8): the ``brdffit`` BSDF plugin, its dict and its XML.
 
-The plugin is the callback BSDF of :mod:`brdffit.render.bsdf`: ``eval`` is the JAX ``model.eval``
-the fit was made with (one definition of the formula), ``sample``/``pdf`` the lobe mixture of
-:mod:`brdffit.render.sampling`. Its properties are the model name and the parameters, each under
+The plugin is the symbolic BSDF of :mod:`brdffit.render.symbolic_bsdf`: ``eval`` is the JAX
+``model.eval`` the fit was made with, translated to Dr.Jit (one definition of the formula, two
+tracers), ``sample``/``pdf`` the lobe mixture of :mod:`brdffit.render.sampling`; where a formula
+cannot be translated, the callback BSDF of :mod:`brdffit.render.bsdf` (render those scenes inside
+:func:`brdffit.evaluated_calls`). Its properties are the model name and the parameters, each under
 its SPEC name with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` -> ``ggx1_ks``)::
 
     <bsdf type="brdffit" id="paint">
@@ -13,16 +15,14 @@ its SPEC name with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` ->
         <float name="f0" value="0.04"/>
     </bsdf>
 
-Using it (the plugin must be registered for the Mitsuba variant in use, and the scene rendered
-with Dr.Jit's calls evaluated, which :func:`brdffit.evaluated_calls` does)::
+Using it (the plugin must be registered for the Mitsuba variant in use)::
 
     import mitsuba as mi
     mi.set_variant("llvm_ad_rgb")
     import brdffit                      # registers "brdffit" when a variant is already set
     brdffit.register_mitsuba()          # otherwise (after choosing the variant): does the same
     scene = mi.load_file("scene.xml")   # holds <include filename="bsdf.xml"/> and <ref id="..."/>
-    with brdffit.evaluated_calls():
-        image = mi.render(scene, spp=64)
+    image = mi.render(scene, spp=64)
 
 or, from Python, ``mi.load_dict({..., "bsdf": fit.to_mitsuba()})``.
 """
@@ -58,7 +58,8 @@ def _model_and_params(model_or_fit, params):
 
 
 def _plugin(props):
-    """Constructor of the ``brdffit`` plugin: the callback BSDF of the model in ``props``."""
+    """Constructor of the ``brdffit`` plugin: the model in ``props`` as a :mod:`symbolic_bsdf` (its JAX
+    formula run by Dr.Jit), or the callback BSDF where the formula cannot be translated."""
     from .. import models
     from .bsdf import _callback_class, model_brdf
     from .sampling import Mixture
@@ -79,9 +80,16 @@ def _plugin(props):
         raise ValueError(f"brdffit BSDF ({model.name}): missing parameters {missing}")
     params = model.check_params({by_key[k]: np.asarray(props[k], np.float64).reshape(-1) for k in by_key})
     from .._mitsuba import user_mitsuba
+    from .drjit_formula import Unsupported
+    from .symbolic_bsdf import symbolic_bsdf
 
-    cls = _callback_class(user_mitsuba().variant())
-    return cls(props, brdf=model_brdf(model, params), label=f"brdffit:{model.name}", mixture=Mixture.for_model(model, params))
+    mixture = Mixture.for_model(model, params)
+    try:  # the formula run by Dr.Jit: renders in any mode, no evaluated_calls() needed
+        return symbolic_bsdf(model, {k: np.asarray(v) for k, v in params.items()}, mixture,
+                             f"brdffit:{model.name}", props=props)
+    except Unsupported:  # a formula the translation does not cover: the JAX callback
+        cls = _callback_class(user_mitsuba().variant())
+        return cls(props, brdf=model_brdf(model, params), label=f"brdffit:{model.name}", mixture=mixture)
 
 
 def register_mitsuba() -> str:
@@ -170,8 +178,8 @@ def mitsuba_bsdf(model_or_fit, params=None):
     Model with ``params``) in any Mitsuba 3 scene: the ``brdffit`` plugin's dict (registered here
     for the current variant). With parameter *maps* (any value an (H, W) or (H, W, size) array,
     e.g. a per-texel BTF fit) it is a BSDF object instead, looked up by uv (see :func:`map_bsdf`);
-    it goes into a scene dict the same way. Render scenes that hold either inside
-    :func:`brdffit.evaluated_calls`."""
+    it goes into a scene dict the same way. Render scenes that hold parameter maps inside
+    :func:`brdffit.evaluated_calls` (the maps are looked up per texel by JAX)."""
     if not hasattr(model_or_fit, "params") and _is_map(params):
         return map_bsdf(model_or_fit, params)
     model, values = _model_and_params(model_or_fit, params)
@@ -200,7 +208,7 @@ def bsdf_xml(model_or_fit, params=None, bsdf_id: str = "brdffit") -> str:
         f"<!-- {html.escape(about).replace('--', '- -')}. {model.citation.replace('--', '- -')}.",
         "     Load it with `import brdffit; brdffit.register_mitsuba()` (after mi.set_variant), include it",
         '     with <include filename="THIS FILE"/> and refer to it with <ref id="' + html.escape(bsdf_id) + '"/>;',
-        "     render inside `with brdffit.evaluated_calls():`. -->",
+        "     render it like any scene. -->",
         '<scene version="3.0.0">',
         f'    <bsdf type="{PLUGIN}" id="{html.escape(bsdf_id, quote=True)}">',
         f'        <string name="model" value="{html.escape(model.name, quote=True)}"/>',
