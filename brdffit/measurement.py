@@ -27,6 +27,24 @@ def _as_float_array(x) -> Array:
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
+def _unit_rows(w) -> Array:
+    """Directions as unit vectors (SPEC 1): a row whose length is off 1 by more than 1e-9 is
+    normalised (issue 28: non-unit directions went into the formulas as they were and biased the
+    fit, alpha 0.105 for 0.2). Rows of length 0 or not finite are kept: they are invalid samples,
+    and a fit leaves them out where they lie below the horizon or carry weight 0."""
+    if np.iscomplexobj(w):
+        raise ValueError("a Measurement holds real numbers, not complex values")
+    a = np.asarray(w, dtype=np.float64)
+    if a.ndim == 2 and a.shape[-1] == 3:
+        norm = np.sqrt(np.einsum("ij,ij->i", a, a))
+        off = np.isfinite(norm) & (norm > 0) & (np.abs(norm - 1.0) > 1e-9)
+        if off.any():
+            a = a.copy()
+            a[off] /= norm[off, None]
+            return _as_float_array(a)
+    return _as_float_array(w)
+
+
 def _freeze(extra) -> tuple[tuple[str, Any], ...]:
     if extra is None:
         return ()
@@ -79,7 +97,7 @@ class Measurement:
         if values.ndim == 1:
             values = values[:, None]
         fields = {
-            "wi": _as_float_array(wi), "wo": _as_float_array(wo), "values": values,
+            "wi": _unit_rows(wi), "wo": _unit_rows(wo), "values": values,
             "weights": _as_float_array(jnp.ones(values.shape[0]) if weights is None else weights),
             "name": name, "source": source, "grid": grid, "colour_space": colour_space, "units": units,
             "extra": _freeze(extra),

@@ -74,11 +74,14 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
 
             v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
                          spp=spp or DEFAULT_SPP, progress=progress)
+    from ..render.metrics import format_metric as fm
+
     o = v.metrics["overall"]
-    click.echo(
-        f"{out_path}: {len(v.files)} files; rmse {o['rmse']:.4g}, relative rmse {o['relative_rmse']:.3g}, "
-        f"psnr {o['psnr']:.2f} dB, flip {o['flip']:.4f}"
-    )
+    line = (f"{out_path}: {len(v.files)} files; rmse {fm(o['rmse'], '.4g')}, relative rmse "
+            f"{fm(o['relative_rmse'], '.3g')}, psnr {fm(o['psnr'], '.2f')} dB, flip {fm(o['flip'], '.4f')}")
+    if any(o[k] != o[k] for k in ("rmse", "psnr", "flip")):
+        line += " (n/a: the rendered images hold values that are not finite numbers)"
+    click.echo(line)
     total = _since_process_start()
     startup = None if total is None else max(0.0, total - (time.perf_counter() - t0))
     # startup: Python and `import brdffit` (JAX) before this command ran

@@ -86,6 +86,17 @@ def _rows_replaced(a: np.ndarray, keep: np.ndarray, stand_in) -> np.ndarray:
     return out
 
 
+def _refuse_infinite(w: np.ndarray, what: str) -> None:
+    """An infinite weight would make every other sample's weight 0 and the residuals NaN (issue 28:
+    the fit then wrote NaN parameters): one clear line instead. NaN and negative weights keep their
+    meaning, "leave this sample out"."""
+    bad = np.isinf(w) & (w > 0)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise UsageError(f"{what}: {int(bad.sum())} sample(s) have an infinite weight (the first: sample {first}); "
+                         "weights must be finite (0 leaves a sample out)")
+
+
 def prepare(m: Measurement, weights=None) -> Prepared:
     """Arrays for the compiled residual; excluded samples get weight 0 and safe stand-ins."""
     if not isinstance(m, Measurement):
@@ -94,12 +105,14 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     values = np.asarray(m.values, dtype=np.float64)
     wi, wo = np.asarray(m.wi, dtype=np.float64), np.asarray(m.wo, dtype=np.float64)
     w = np.asarray(m.weights, dtype=np.float64)
+    _refuse_infinite(w, f"{m.name}: weights")
     excluded = _exclusions(values, w, wi, wo)
     mask = ~np.logical_or.reduce(list(excluded.values()))
     if weights is not None:
         extra = np.asarray(weights, dtype=np.float64)
         if extra.shape != w.shape:
             raise UsageError(f"weights has shape {extra.shape}, expected {w.shape}")
+        _refuse_infinite(extra, f"{m.name}: weights=")
         w = w * extra
         # counted by reason like the Measurement's own exclusions (a scene that never looks there)
         excluded["weight 0 in weights="] = ~(np.isfinite(extra) & (extra > 0))

@@ -65,7 +65,7 @@ def image_metrics(
         a.astype(np.float32), b.astype(np.float32), "LDR", inputsRGB=True, applyMagma=False, computeMeanError=False
     )
     fmap = np.asarray(fmap).reshape(ref.shape[:2])
-    return {
+    out = {
         "rmse": rmse,
         "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
         "psnr": psnr,
@@ -73,6 +73,12 @@ def image_metrics(
         "_flip_map": fmap,
         "_mse_tonemapped": mse_t,
     }
+    if not (np.all(np.isfinite(ref[m])) and np.all(np.isfinite(tst[m]))):
+        # The tone mapper clips inf and NaN to displayable values, so PSNR and FLIP would read as a
+        # perfect match of images that hold no numbers (issue 28): none of them can be computed.
+        out.update(rmse=float("nan"), relative_rmse=float("nan"), psnr=float("nan"), flip=float("nan"),
+                   _mse_tonemapped=float("nan"))
+    return out
 
 
 def summarise(per_light: list[dict], reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> dict[str, float]:
@@ -82,12 +88,20 @@ def summarise(per_light: list[dict], reference: np.ndarray, test: np.ndarray, ma
     rmse = float(np.sqrt(np.mean(d * d)))
     ref_rms = float(np.sqrt(np.mean(np.asarray(reference, np.float64)[m] ** 2)))
     mse_t = float(np.mean([p["_mse_tonemapped"] for p in per_light]))
+    if not np.all(np.isfinite(d)):  # as image_metrics: no number, no metric
+        rmse = float("nan")
     return {
         "rmse": rmse,
         "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
-        "psnr": float(10 * np.log10(1.0 / mse_t)) if mse_t > 0 else float("inf"),
+        # NaN (a light whose images hold no numbers) stays NaN: never a perfect-looking inf
+        "psnr": float(10 * np.log10(1.0 / mse_t)) if mse_t > 0 else (float("inf") if mse_t == 0 else float("nan")),
         "flip": float(np.mean([p["flip"] for p in per_light])),
     }
+
+
+def format_metric(value: float, spec: str) -> str:
+    """A metric for people: ``n/a`` where it could not be computed (NaN), else ``format(value, spec)``."""
+    return "n/a" if value != value else format(value, spec)
 
 
 def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) -> dict[str, float]:

@@ -1,0 +1,68 @@
+"""Hostile inputs (issue 28): infinite weights are refused with one line, non-unit directions are
+normalised, a metric that cannot be computed says so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.cli import main
+from brdffit.errors import UsageError
+
+GGX = {"kd": [0.1, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "alpha": 0.2, "f0": 0.04}
+
+
+def ggx_measurement(scale_dirs=1.0, weights=None):
+    wi, wo = brdffit.ubo_pairs()
+    values = np.asarray(brdffit.models.get("ggx").eval(GGX, wi, wo))
+    return brdffit.Measurement(wi * scale_dirs, wo * scale_dirs, values, weights, grid="ubo81", name="ggx data")
+
+
+def test_infinite_weights_are_refused():
+    w = np.ones(6561)
+    w[17] = np.inf
+    with pytest.raises(UsageError, match=r"ggx data: weights: 1 sample\(s\) have an infinite weight \(the first: sample 17\)"):
+        brdffit.fit(ggx_measurement(weights=w), "ggx")
+    with pytest.raises(UsageError, match=r"weights=: 1 sample\(s\) have an infinite weight"):
+        brdffit.fit(ggx_measurement(), "ggx", weights=w)
+
+
+def test_cli_refuses_infinite_weights_and_writes_nothing(tmp_path, capsys):
+    w = np.ones(6561)
+    w[3] = np.inf
+    brdffit.save(ggx_measurement(weights=w), tmp_path / "m.npz")
+    assert main(["fit", str(tmp_path / "m.npz"), "--model", "ggx", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "infinite weight" in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_non_unit_directions_fit_like_unit_ones():
+    m = ggx_measurement(scale_dirs=2.0)  # the same directions, twice as long
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(m.wi), axis=1), 1.0, rtol=1e-12)
+    fit = brdffit.fit(m, "ggx")
+    assert fit.params["alpha"][0] == pytest.approx(0.2, rel=1e-4)  # was 0.105 before normalising
+
+
+def test_unit_directions_are_kept_bit_for_bit():
+    wi, wo = brdffit.ubo_pairs()
+    m = brdffit.Measurement(wi, wo, np.ones((6561, 3)))
+    assert np.array_equal(np.asarray(m.wi), wi) and np.array_equal(np.asarray(m.wo), wo)
+
+
+def test_metrics_of_images_without_numbers_are_not_a_perfect_match():
+    """Before: rmse nan, psnr inf, flip 0 (the tone mapper clips inf to white on both sides)."""
+    from brdffit.render.metrics import format_metric, image_metrics, summarise
+
+    ref = np.full((8, 8, 3), 0.2)
+    bad = ref.copy()
+    bad[2, 3] = np.inf
+    mask = np.ones((8, 8), bool)
+    m = image_metrics(ref, bad, mask)
+    assert all(np.isnan(m[k]) for k in ("rmse", "relative_rmse", "psnr", "flip"))
+    overall = summarise([m], ref[None], bad[None], mask[None])
+    assert np.isnan(overall["psnr"]) and np.isnan(overall["rmse"])
+    assert format_metric(overall["psnr"], ".2f") == "n/a" and format_metric(31.456, ".2f") == "31.46"
+    same = image_metrics(ref, ref.copy(), mask)  # a true perfect match keeps its infinite PSNR
+    assert same["psnr"] == np.inf and same["rmse"] == 0.0 and same["flip"] == 0.0
