@@ -76,13 +76,17 @@ def test_extra_weights_multiply_and_exclude():
     assert p.excluded == {"weight 0": 1, "non-finite value": 1, "light below horizon": 1, "view below horizon": 1,
                           "weight 0 in weights=": 1} and p.n_excluded == 5
     assert float(np.asarray(p.data[3])[0, 0]) == pytest.approx(math.sqrt(2.0 / (2.0 * 2)), rel=1e-15)
-    for bad in (np.nan, np.inf):  # a non-finite extra weight excludes its sample
-        odd = extra.copy()
-        odd[0] = bad
-        with pytest.raises(UsageError) as caught:
-            prepare(m, odd)
-        assert str(caught.value) == ("case: no valid samples to fit (all have weight 0, non-finite values or lie "
-                                     "below the horizon)")
+    odd = extra.copy()
+    odd[0] = np.nan  # a NaN extra weight excludes its sample
+    with pytest.raises(UsageError) as caught:
+        prepare(m, odd)
+    assert str(caught.value) == ("case: no valid samples to fit (all have weight 0, non-finite values or lie "
+                                 "below the horizon)")
+    odd[0] = np.inf  # an infinite one is refused (issue 28): it would leave every other sample weight 0
+    with pytest.raises(UsageError) as caught:
+        prepare(m, odd)
+    assert str(caught.value) == ("case: weights=: 1 sample(s) have an infinite weight (the first: sample 0); "
+                                 "weights must be finite (0 leaves a sample out)")
     with pytest.raises(UsageError) as caught:
         prepare(m, np.ones(5))
     assert str(caught.value) == "weights has shape (5,), expected (6,)"
