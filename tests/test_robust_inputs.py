@@ -66,3 +66,15 @@ def test_metrics_of_images_without_numbers_are_not_a_perfect_match():
     assert format_metric(overall["psnr"], ".2f") == "n/a" and format_metric(31.456, ".2f") == "31.46"
     same = image_metrics(ref, ref.copy(), mask)  # a true perfect match keeps its infinite PSNR
     assert same["psnr"] == np.inf and same["rmse"] == 0.0 and same["flip"] == 0.0
+
+
+def test_at_bound_does_not_depend_on_the_unit_of_the_data():
+    """kd recovered exactly at 2e-13 in data scaled by 1e-12 is not 'on its lower bound 0' (issue 28);
+    a kd that is really 0 still is, whatever the scale."""
+    m = ggx_measurement()
+    for kd, expected in ((0.2, {}), (0.0, {"kd": "lower"})):
+        wi, wo = np.asarray(m.wi), np.asarray(m.wo)
+        values = np.asarray(brdffit.models.get("ggx").eval({**GGX, "kd": [kd] * 3}, wi, wo))
+        for scale in (1.0, 1e-12):
+            fit = brdffit.fit(brdffit.Measurement(wi, wo, values * scale, grid="ubo81", name="s"), "ggx")
+            assert {k: v for k, v in fit.at_bound.items() if k in ("kd", "ks")} == expected, (kd, scale, fit)

@@ -248,7 +248,8 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
     stderr = standard_errors(m, params, jtj, value, prep.n_used * prep.channels, lo, hi, free)
-    at_bound = space.at_bound(v)
+    ref = np.asarray(prep.data[2])[prep.used]  # the data's unit (see ParameterSpace.at_bound)
+    at_bound = space.at_bound(v, data_scale=float(np.mean(np.abs(ref))) if ref.size else None)
     wo = np.asarray(measurement.wo)[prep.used]
     warnings = fit_warnings(space, v, at_bound, stderr, sample_spacing(wo))
     status = STATUS_TEXT[code]

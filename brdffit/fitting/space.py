@@ -186,11 +186,21 @@ class ParameterSpace:
                     i += n
         return perm
 
-    def at_bound(self, v) -> dict[str, str]:
+    def at_bound(self, v, data_scale: float | None = None) -> dict[str, str]:
         """Free parameters of ``v`` on a finite bound of this space: name -> "lower", "upper", or
-        per channel ("lower in channel 0", "upper in channels 1, 2") where only some are."""
+        per channel ("lower in channel 0", "upper in channels 1, 2") where only some are.
+
+        ``data_scale``: the mean |value| of the fitted data. A scale (linear parameter) with an open
+        side carries the unit of the data, so its tolerance is taken relative to it (issue 28: data
+        x 1e-12 gave "kd 2e-13 ended on its lower bound 0" for a kd recovered exactly); without it,
+        relative to the physical range as for every other parameter."""
         v = np.asarray(v, dtype=np.float64)
-        tol = AT_BOUND_RTOL * _span(self.model, self.lo, self.hi)
+        span = _span(self.model, self.lo, self.hi)
+        if data_scale is not None and data_scale > 0 and np.isfinite(data_scale):
+            for p, (name, sl) in zip(self.model.params, self.model.slices()):
+                if p.linear and not (np.isfinite(self.lo[sl]).all() and np.isfinite(self.hi[sl]).all()):
+                    span[sl] = span[sl] * data_scale
+        tol = AT_BOUND_RTOL * span
         on_lo = self.free & np.isfinite(self.lo) & (v <= self.lo + tol)
         on_hi = self.free & np.isfinite(self.hi) & (v >= self.hi - tol) & ~on_lo
         out = {}
