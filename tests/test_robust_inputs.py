@@ -78,3 +78,31 @@ def test_at_bound_does_not_depend_on_the_unit_of_the_data():
         for scale in (1.0, 1e-12):
             fit = brdffit.fit(brdffit.Measurement(wi, wo, values * scale, grid="ubo81", name="s"), "ggx")
             assert {k: v for k, v in fit.at_bound.items() if k in ("kd", "ks")} == expected, (kd, scale, fit)
+
+
+def _usage(theta_deg, n=50):
+    from brdffit.scene.usage import Usage
+
+    rng = np.random.default_rng(0)
+    t = np.radians(theta_deg)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    wi = np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.full(n, np.cos(t))], -1)
+    wo = wi * [-1, -1, 1]  # the mirror pair: where a glossy material shows its highlight
+    return Usage(wi, wo, np.ones(n), np.ones(n, bool), "scene.xml", "paint", (8, 8), 1, 2, 0.0)
+
+
+def test_a_scene_beyond_the_data_is_reported():
+    m = ggx_measurement()
+    grazing = _usage(86.0)  # UBO-81 stops at 75 degrees
+    assert grazing.coverage(m) == 0.0
+    fit = brdffit.fit(m, "ggx", scene=grazing)
+    (note,) = [w for w in fit.warnings if "the scene looks" in w]
+    assert note.startswith("the data cover 0% of where the scene looks ('paint' in scene.xml)")
+    assert "brdffit.scene.fit_data(source, usage)" in note
+    inside = _usage(30.0)
+    assert inside.coverage(m) == 1.0
+    assert not [w for w in brdffit.fit(m, "ggx", scene=inside).warnings if "the scene looks" in w]
+    half = _usage(30.0, 10)
+    half = type(half)(np.vstack([half.wi, grazing.wi[:10]]), np.vstack([half.wo, grazing.wo[:10]]), np.ones(20),
+                      np.ones(20, bool), "s", "p", (8, 8), 1, 2, 0.0)
+    assert half.coverage(m) == pytest.approx(0.5)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import functools
 from collections.abc import Callable, Mapping
 
@@ -173,8 +175,10 @@ def fit(
     scene: a ``brdffit.scene.Usage`` (``brdffit.scene_usage``, SPEC 12): the samples are weighted
     by where that scene looks (``usage.weights``), times ``weights``.
     """
+    scene_note = None
     if scene is not None:  # SPEC 12
         weights = scene.weights(measurement) * (1.0 if weights is None else np.asarray(weights, np.float64))
+        scene_note = _coverage_note(scene, measurement)
     note = progress or _quiet
     loss = check_loss(loss)
     solver = check_solver(solver)
@@ -227,13 +231,34 @@ def fit(
     perm = space.canonical_order(space.clip(v))
     v = space.clip(v)[perm]
     jtj = None if jtj is None else np.asarray(jtj)[np.ix_(perm, perm)]
-    return _result(space, loss, solver, measurement, prep, v, value, code, steps, v0,
+    result = _result(space, loss, solver, measurement, prep, v, value, code, steps, v0,
                    seconds={"compile": compile_s, "run": run_s, "init": init_s},
                    metrics=metrics, jtj=jtj,
                    options={"max_steps": max_steps, "rtol": rtol, "atol": atol,
                             "multistart": None if multistart is None else int(multistart),
                             "starts": int(n_given), "init": "grid" if init is None else "given",
                             **space_options(bounds, fixed, physical)})
+    if scene_note is not None:
+        result = dataclasses.replace(result, warnings=(*result.warnings, scene_note))
+    return result
+
+
+#: Below this fraction of a scene's weight covered by the data, a scene-weighted fit says so.
+COVERAGE_WARN = 0.95
+
+
+def _coverage_note(scene, measurement: Measurement) -> str | None:
+    """One sentence when the data cover too little of where ``scene`` looks (issue 28: such a fit
+    was the plain fit without a word), else None."""
+    if not hasattr(scene, "coverage"):  # any object with weights(measurement) may weight a fit
+        return None
+    covered = scene.coverage(measurement)  # a brdffit.scene.Usage (duck-typed: no upward import)
+    if covered >= COVERAGE_WARN:
+        return None
+    return (f"the data cover {covered:.0%} of where the scene looks ({scene.material!r} in {scene.scene}); "
+            "the rest gets the floor weight, so the fit is closer to the plain fit than to the scene's: "
+            "for a source that can be evaluated anywhere (RGL, MERL, UTIA), brdffit.scene.fit_data(source, usage) "
+            "samples it where the scene looks")
 
 
 def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep, v, value, code, steps, v0, *,

@@ -58,6 +58,10 @@ if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed
 #: gains 0.03-0.19 and the sphere validation loses less than that on every material; at 0.1 the
 #: scene gains hardly more and one material's sphere FLIP loses more (0.16) than its scene gains.
 DEFAULT_FLOOR = 0.3
+#: Distance (degrees, see Usage.coverage) within which a measured sample covers a scene's pair.
+COVERAGE_RADIUS_DEG = 20.0
+#: How far beyond the data's largest polar angle a scene's direction still counts as covered.
+COVERAGE_MARGIN_DEG = 5.0
 #: Path length used for integrators with unbounded depth (``max_depth = -1``).
 MAX_DEPTH_CAP = 8
 #: Rec. 709 luminance of linear RGB: the scalar a contribution is measured in.
@@ -83,6 +87,16 @@ def rusinkiewicz(wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> 
 
 #: Grid of the density: 1 degree cells over theta_h, theta_d in [0, 90] and phi_d in [0, 90].
 _CELLS = 91
+
+
+def _pair_coordinates(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """(smaller theta, larger theta, |dphi| sqrt(sin theta_i sin theta_o)) in degrees: the
+    coordinates :meth:`Usage.coverage` measures distances in."""
+    ti = np.arccos(np.clip(wi[:, 2], -1.0, 1.0))
+    to = np.arccos(np.clip(wo[:, 2], -1.0, 1.0))
+    dphi = np.abs(np.mod(np.arctan2(wi[:, 1], wi[:, 0]) - np.arctan2(wo[:, 1], wo[:, 0]) + np.pi, 2 * np.pi) - np.pi)
+    arc = dphi * np.sqrt(np.abs(np.sin(ti) * np.sin(to)))
+    return np.degrees(np.stack([np.minimum(ti, to), np.maximum(ti, to), arc], -1))
 
 
 def _histogram(coords: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -182,6 +196,32 @@ class Usage:
         wo = np.asarray(measurement.wo, np.float64)
         return np.maximum(self.density(wi, wo, bandwidth_deg=bandwidth_deg), floor)
 
+    def coverage(self, measurement, *, radius_deg: float = COVERAGE_RADIUS_DEG) -> float:
+        """The fraction of this usage's weight at pairs the measurement's valid samples cover.
+
+        A pair (theta_i, theta_o, dphi) counts as covered when (1) neither direction lies more than
+        ``COVERAGE_MARGIN_DEG`` beyond the data's largest polar angle (UBO-81 stops at 75 degrees:
+        a scene that looks at 86 degrees is not covered, however near the 75-degree ring is), and
+        (2) a valid sample lies within ``radius_deg`` of it in (theta_i, theta_o, dphi sqrt(sin
+        theta_i sin theta_o)) degrees, light and view sorted (reciprocity): the azimuth difference
+        weighs as the arc it spans, nothing at the pole, where an isotropic BRDF does not depend on
+        it. Within the UBO-81 grid's 75 degrees, a pair lies at most 16 degrees from a sample in these
+        units (median 6.5, 99th percentile 11; measured over 200,000 random pairs).
+        1 where the data see everything the scene looks at; below 1 where the scene looks beyond
+        them: there a scene-weighted fit falls back to the floor weight, i.e. to the plain fit."""
+        from scipy.spatial import cKDTree
+
+        total = float(np.sum(self.weight))
+        if len(self) == 0 or not total > 0:
+            return 1.0
+        valid = measurement.valid_mask()
+        if not valid.any():
+            return 0.0
+        data = _pair_coordinates(np.asarray(measurement.wi, np.float64)[valid], np.asarray(measurement.wo, np.float64)[valid])
+        pairs = _pair_coordinates(self.wi, self.wo)
+        inside = pairs[:, 1] <= data[:, 1].max() + COVERAGE_MARGIN_DEG  # column 1: the larger polar angle
+        dist, _ = cKDTree(data).query(pairs, k=1, distance_upper_bound=float(radius_deg))
+        return float(np.sum(self.weight[inside & np.isfinite(dist)]) / total)
 
 def fit_data(source, usage: Usage, *, n: int = 2048, seed: int = 0):
     """The measurement to fit for a scene: ``source`` (a path or a Measurement) read as usual, and,
