@@ -10,6 +10,7 @@ sampling, the only setting the native models write.
 from __future__ import annotations
 
 import functools
+import math
 
 import jax.numpy as jnp
 import numpy as np
@@ -71,6 +72,17 @@ def smith_g1(v, h, alpha):
     g = 2.0 / (1.0 + jnp.sqrt(1.0 + alpha * alpha * m.tan2_theta(v)))
     back = m.dot(v, h) * v[..., 2:3] <= 0.0
     return jnp.where(back, 0.0, g)
+
+
+def rgb(values) -> dict:
+    """An RGB property of a ``mi.load_dict`` dictionary."""
+    return {"type": "rgb", "value": [float(x) for x in values]}
+
+
+def ggx_halfwidth(p) -> float:
+    """Half width at half maximum of a GGX lobe of roughness ``p["alpha"]``, in reflected directions:
+    twice the half-vector angle where D falls to half its peak (as ``brdffit.models.ggx``)."""
+    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
 
 
 # -- roughplastic's precomputed tables ----------------------------------------------------------

@@ -32,12 +32,10 @@ Mitsuba's IOR list in RGB).
 
 from __future__ import annotations
 
-import math
-
 import jax.numpy as jnp
 
 from . import _math as m
-from ._mitsuba_math import fresnel_conductor, ggx_d, smith_g1
+from ._mitsuba_math import fresnel_conductor, ggx_d, ggx_halfwidth, rgb, smith_g1
 from .base import Lobe, Model, Param
 
 PARAMS = (
@@ -56,22 +54,14 @@ def formula(p, wi, wo):
     return f * d * g / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
 
 
-def halfwidth(p):
-    """As ``ggx``: twice the half-vector angle where D falls to half its peak."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
-
-
 def to_native(p) -> dict:
-    def rgb(v):
-        return {"type": "rgb", "value": [float(x) for x in v]}
-
     return {
         "type": "roughconductor",
         "distribution": "ggx",
         "alpha": float(p["alpha"][0]),
         "eta": rgb(p["eta"]),
         "k": rgb(p["k"]),
-        "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},  # the plugin's default, written
+        "specular_reflectance": rgb([1.0, 1.0, 1.0]),  # the plugin's default, written
     }
 
 
@@ -84,6 +74,6 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     lobes=(Lobe("mitsuba:roughconductor", ("alpha", "eta", "k")),),
-    halfwidth=halfwidth,
+    halfwidth=ggx_halfwidth,
     to_native=to_native,
 )

@@ -34,13 +34,11 @@ reflectances as RGB. Bounds: what Mitsuba accepts (reflectances in [0, 1], int_i
 
 from __future__ import annotations
 
-import math
-
 import jax.numpy as jnp
 
 from . import _math as m
-from ._mitsuba_math import (external_transmittance, fresnel_dielectric, ggx_d, internal_reflectance,
-                            lerp_table, smith_g1)
+from ._mitsuba_math import (external_transmittance, fresnel_dielectric, ggx_d, ggx_halfwidth, internal_reflectance,
+                            lerp_table, rgb, smith_g1)
 from .base import Lobe, Model, Param
 
 #: The exterior medium's IOR written into every export (vacuum): eta = int_ior.
@@ -69,15 +67,7 @@ def formula(p, wi, wo):
     return specular + diffuse
 
 
-def halfwidth(p):
-    """As ``ggx``: twice the half-vector angle where D falls to half its peak."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
-
-
 def to_native(p) -> dict:
-    def rgb(v):
-        return {"type": "rgb", "value": [float(x) for x in v]}
-
     return {
         "type": "roughplastic",
         "distribution": "ggx",
@@ -99,6 +89,6 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     lobes=(Lobe("mitsuba:roughplastic", ("alpha", "int_ior", "specular_reflectance")),),
-    halfwidth=halfwidth,
+    halfwidth=ggx_halfwidth,
     to_native=to_native,
 )

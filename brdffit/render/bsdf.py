@@ -145,6 +145,41 @@ def _vec_to_numpy(v) -> np.ndarray:
 
 
 @functools.cache
+def mixture_sampling(variant: str):
+    """``pdf``, ``eval_pdf`` and ``sample`` of brdffit's Python BSDFs (as a class whose methods they
+    take over: nanobind classes take one base only): directions
+    drawn from the lobe mixture ``self.mixture`` (:mod:`brdffit.render.sampling`), values from
+    ``self._eval_cos(si, wo, active)`` (f_r cos theta_light); a sample's weight is eval / pdf."""
+    from .._mitsuba import user_mitsuba
+
+    mi = user_mitsuba()
+    import drjit as dr
+
+    scalar = variant.startswith("scalar")
+
+    class MixtureSampling:
+        def pdf(self, ctx, si, wo, active=True):
+            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
+            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
+            bs.wo = wo
+            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+            bs.sampled_component = mi.UInt32(0)
+            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+            value = self._eval_cos(si, wo, ok)
+            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
+
+    return MixtureSampling
+
+
+@functools.cache
 def _callback_class(variant: str):
     """The CallbackBSDF class of one Mitsuba variant, defined on first use (it subclasses mi.BSDF)."""
     from .._mitsuba import symbolic_scope, user_mitsuba
@@ -156,6 +191,8 @@ def _callback_class(variant: str):
     import drjit as dr
 
     scalar = variant.startswith("scalar")
+
+    sampling = mixture_sampling(variant)
 
     class CallbackBSDF(mi.BSDF):
         """A reflective BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.
@@ -212,23 +249,7 @@ def _callback_class(variant: str):
         def eval(self, ctx, si, wo, active=True):
             return self._eval_cos(si, wo, active)
 
-        def pdf(self, ctx, si, wo, active=True):
-            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
-            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
-            bs.wo = wo
-            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
-            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            value = self._eval_cos(si, wo, ok)
-            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
+        pdf, eval_pdf, sample = sampling.pdf, sampling.eval_pdf, sampling.sample
 
         def traverse(self, callback):
             pass

@@ -31,7 +31,11 @@ def _symbolic_class(variant: str):
         raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
     import drjit as dr
 
+    from .bsdf import mixture_sampling
+
     scalar = variant.startswith("scalar")
+
+    sampling = mixture_sampling(variant)
 
     class SymbolicBSDF(mi.BSDF):
         """An analytic model's f_r computed by Dr.Jit from its (translated) JAX formula."""
@@ -64,23 +68,7 @@ def _symbolic_class(variant: str):
         def eval(self, ctx, si, wo, active=True):
             return self._eval_cos(si, wo, active)
 
-        def pdf(self, ctx, si, wo, active=True):
-            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
-            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
-            bs.wo = wo
-            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
-            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            value = self._eval_cos(si, wo, ok)
-            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
+        pdf, eval_pdf, sample = sampling.pdf, sampling.eval_pdf, sampling.sample
 
         def traverse(self, callback):
             if scalar:
