@@ -37,7 +37,9 @@ def fresnel_conductor(cos_theta_i, eta, k):
     term3 = a2pb2 * c2 + s4
     term4 = term2 * s2
     r_p = r_s * (term3 - term4) / (term3 + term4)
-    return 0.5 * (r_s + r_p)
+    # at a matched index (eta 1, k 0) the differences above cancel to round-off, e.g. -7.7e-18:
+    # a reflectance is never negative (Mitsuba's float32 result there is 0 to its precision)
+    return jnp.maximum(0.5 * (r_s + r_p), 0.0)
 
 
 def fresnel_dielectric(cos_theta_i, eta):
