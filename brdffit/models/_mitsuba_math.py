@@ -29,8 +29,15 @@ def fresnel_conductor(cos_theta_i, eta, k):
     s2 = 1.0 - c2
     s4 = s2 * s2
     temp1 = eta * eta - k * k - s2
-    a2pb2 = m.safe_sqrt(temp1 * temp1 + 4.0 * k * k * eta * eta)
-    a = m.safe_sqrt(0.5 * (a2pb2 + temp1))
+    four_k2_eta2 = 4.0 * k * k * eta * eta
+    a2pb2 = m.safe_sqrt(temp1 * temp1 + four_k2_eta2)
+    # a^2 = (a2pb2 + temp1) / 2 as Mitsuba writes it cancels where temp1 < 0 (total internal
+    # reflection of a small eta, k ~ 0); there it is 4 k^2 eta^2 / (2 (a2pb2 - temp1)), the same
+    # number without the cancellation (found by the reciprocity property test: jitted, one order of
+    # the directions gave F = 0 instead of 1).
+    negative = temp1 < 0.0
+    denominator = jnp.where(negative, a2pb2 - temp1, 1.0)
+    a = m.safe_sqrt(jnp.where(negative, 0.5 * four_k2_eta2 / denominator, 0.5 * (a2pb2 + temp1)))
     term1 = a2pb2 + c2
     term2 = 2.0 * cos_theta_i * a
     r_s = (term1 - term2) / (term1 + term2)
