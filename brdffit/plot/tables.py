@@ -154,7 +154,7 @@ def _residual_and_log_rmse(fitted, ref, cos_l, used) -> tuple[np.ndarray, float]
     compiled program, kept on disk like the fit programs (op by op it was ~15 small programs
     compiled per process; jitted, its tracing and lowering cost ~0.1 s of every ``brdffit fit``)."""
     from ..fitting.losses import masked_log_residual
-    from ..fitting.program import compiled
+    from ..fitting.cache import compiled
 
     args = tuple(np.asarray(a, np.float64) for a in (fitted, ref, cos_l, used))
     program, _ = compiled(("masked_log_residual",), lambda: masked_log_residual, *args)
