@@ -13,7 +13,7 @@ import numpy as np
 from .._providers import provider
 from ..errors import InputError
 from ..models.base import Model
-from .fitfile import check_fit_document, parse_fit_text
+from .fitfile import METRIC_ALIASES, check_fit_document, parse_fit_text
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
@@ -31,6 +31,13 @@ def _eval_compiled(model: Model, p: dict, wi, wo):
 
     fn, _ = compiled(("eval", model), lambda: model.eval, p, wi, wo)
     return fn(p, wi, wo)
+
+
+def _metrics(recorded: dict) -> dict[str, float]:
+    """A fit file's metrics, an old name read as today's (``fitfile.METRIC_ALIASES``) unless both
+    are present."""
+    out = {k: float(v) for k, v in recorded.items() if METRIC_ALIASES.get(k) not in recorded}
+    return {METRIC_ALIASES.get(k, k): v for k, v in out.items()}
 
 
 def _floats(a) -> list[float]:
@@ -213,7 +220,7 @@ class FitResult:
             params={k: np.asarray(v, dtype=np.float64) for k, v in checked.items()},
             loss=d.get("loss", ""),
             loss_value=float(d.get("loss_value", float("nan"))),
-            metrics={k: float(v) for k, v in d.get("metrics", {}).items()},
+            metrics=_metrics(d.get("metrics", {})),
             steps=int(d.get("steps", 0)),
             converged=bool(d.get("converged", False)),
             status=str(d.get("status", "")),

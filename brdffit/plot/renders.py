@@ -90,7 +90,7 @@ def sphere_panel(reference, fit, light, *, metrics: dict | None = None, scale: f
     cb.ax.tick_params(labelsize=7)
     text = light_label(light) + "   (gold dot: light direction, projected)"
     if metrics:
-        text += (f"   RMSE {metrics['rmse']:.3g}   rel. RMSE {metrics['relative_rmse']:.3g}   "
+        text += (f"   RMSE {metrics['rmse']:.3g}   rel. RMSE {metrics['rel_rmse']:.3g}   "
                  f"PSNR {metrics['psnr']:.1f} dB   FLIP {metrics['flip']:.3f}")
     fig.suptitle(text, fontsize=10)
     return fig

@@ -88,5 +88,5 @@ def scene_panel(reference: np.ndarray, fit: np.ndarray, flip_map: np.ndarray, sc
     fig.colorbar(im, ax=axes[2], fraction=0.046)
     o = metrics["image"]
     fig.suptitle(f"{metrics['material']!r} in {metrics['scene']}: RMSE {o['rmse']:.3g}, rel. RMSE "
-                 f"{o['relative_rmse']:.3g}, PSNR {o['psnr']:.1f} dB, FLIP {o['flip']:.3f}", fontsize=10)
+                 f"{o['rel_rmse']:.3g}, PSNR {o['psnr']:.1f} dB, FLIP {o['flip']:.3f}", fontsize=10)
     return fig
