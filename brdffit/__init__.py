@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 
+from . import _wiring  # noqa: F401 - what the higher layers provide to the lower ones (brdffit/_providers.py)
 from .errors import InputError, UsageError
 from .grid import ubo_angles, ubo_directions, ubo_pairs
 

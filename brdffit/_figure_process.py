@@ -106,7 +106,7 @@ def main() -> None:
     try:
         import matplotlib.backends.backend_agg  # noqa: F401 - what savefig's PNG needs, imported meanwhile
 
-        from brdffit import _mpl_figure, plot  # noqa: F401
+        from brdffit.plot import _figure  # noqa: F401 - the figures and matplotlib's Figure
 
         data, path, dpi = pickle.load(sys.stdin.buffer)
         data.draw().savefig(path, dpi=dpi)

@@ -54,7 +54,7 @@ def test_validate_truth_maps_against_noisy_photographs(known_truth, tmp_path):
     psnr = [p["psnr"] for p in v.metrics["pairs"]]
     # the generator's 1% noise is what separates render and photograph: >= 40 dB, but not exact
     assert min(psnr) >= 40 and max(psnr) < 80, psnr
-    rel = [p["relative_rmse"] for p in v.metrics["pairs"]]
+    rel = [p["rel_rmse"] for p in v.metrics["pairs"]]
     assert all(0.003 < r < 0.03 for r in rel), rel  # ~1% noise, relative
     names = {f.name for f in v.files}
     assert {"metrics.json", "panel_tl030_pl000_tv030_pv180.png", "render_tl000_pl000_tv000_pv000.exr"} <= names

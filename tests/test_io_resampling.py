@@ -13,7 +13,8 @@ from scipy.spatial import ConvexHull, Delaunay
 import brdffit
 from brdffit.errors import InputError, UsageError
 from brdffit.grid import ubo_index, ubo_pairs
-from brdffit.io.resampling import interpolate_scattered, isotropic_coords, resample
+from brdffit.io import resample
+from brdffit.io.resampling import interpolate_scattered, isotropic_coords
 
 
 def direction(theta_deg, phi_deg):

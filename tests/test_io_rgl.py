@@ -106,7 +106,7 @@ def test_rgl_lights_at_or_below_the_horizon_give_zero_silently(tmp_path):
     import warnings
 
     from brdffit._mitsuba import mitsuba
-    from brdffit.io.rgl import eval_mitsuba
+    from brdffit.render.measured import eval_measured
     from tensor_file import isotropic_material
 
     rgb0, rgb1 = np.array([0.2, 0.4, 0.6]), np.array([1.0, 0.9, 0.3])
@@ -124,7 +124,7 @@ def test_rgl_lights_at_or_below_the_horizon_give_zero_silently(tmp_path):
     expected = np.array([stored / 0.8, [0.0] * 3, [0.0] * 3, stored / 1.0])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        f = eval_mitsuba(path, light, view)
+        f = eval_measured(path, light, view)
         m = brdffit.load(path, wi=light, wo=view)
     np.testing.assert_allclose(f, expected, rtol=2e-6, atol=0)
     np.testing.assert_allclose(np.asarray(m.values), expected, rtol=2e-6, atol=0)
@@ -152,8 +152,10 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
     """Should a file Mitsuba's plugin refuses get past our checks (here a two-entry 'jacobian', with
     the check bypassed), the refusal is an InputError naming the file, carrying Mitsuba's own message
     with its whitespace collapsed to single spaces (one line) and cut to 300 characters."""
+    from brdffit import _providers
     from brdffit._mitsuba import mitsuba
     from brdffit.io import rgl
+    from brdffit.render.measured import load_measured
     from tensor_file import isotropic_material
 
     path = isotropic_material(tmp_path / "jac.bsdf", [0.2, 0.4, 0.6], [1.0, 0.9, 0.3], jacobian=np.zeros(2, np.uint8))
@@ -165,7 +167,7 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
     assert "Invalid file structure" in mitsuba_says and len(mitsuba_says) > 300 and "\n" in str(raw.value)
     monkeypatch.setattr(rgl, "check_tensor_file", lambda p: {})
     with pytest.raises(InputError) as info:
-        rgl.load_measured(path)
+        load_measured(path)
     assert info.value.path == str(path)
     assert info.value.problem == "Mitsuba's measured plugin cannot read it: " + mitsuba_says[:300]
     # a failure while evaluating (after the plugin loaded the file) is reported the same way
@@ -173,7 +175,7 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
     def failing(path, light, view):
         raise RuntimeError("drjit:\n  evaluation   failed " + "x" * 400)
 
-    monkeypatch.setattr(rgl, "eval_mitsuba", failing)
+    monkeypatch.setitem(_providers._PROVIDERS, "rgl_eval", failing)  # what rgl.read evaluates with
     with pytest.raises(InputError) as info:
         rgl.read(path)
     said = ("drjit: evaluation failed " + "x" * 400)[:300]

@@ -60,7 +60,7 @@ def test_metrics_of_images_without_numbers_are_not_a_perfect_match():
     bad[2, 3] = np.inf
     mask = np.ones((8, 8), bool)
     m = image_metrics(ref, bad, mask)
-    assert all(np.isnan(m[k]) for k in ("rmse", "relative_rmse", "psnr", "flip"))
+    assert all(np.isnan(m[k]) for k in ("rmse", "rel_rmse", "psnr", "flip"))
     overall = summarise([m], ref[None], bad[None], mask[None])
     assert np.isnan(overall["psnr"]) and np.isnan(overall["rmse"])
     assert format_metric(overall["psnr"], ".2f") == "n/a" and format_metric(31.456, ".2f") == "31.46"

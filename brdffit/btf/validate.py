@@ -181,7 +181,7 @@ def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bo
     d = renders.astype(np.float64) - photos
     rms_ref = float(np.sqrt(np.mean(photos**2)))
     mse_t = float(np.mean([p["_mse"] for p in per]))
-    overall = {"rmse": float(np.sqrt(np.mean(d * d))), "relative_rmse": float(np.sqrt(np.mean(d * d))) / rms_ref if rms_ref else float("nan"),
+    overall = {"rmse": float(np.sqrt(np.mean(d * d))), "rel_rmse": float(np.sqrt(np.mean(d * d))) / rms_ref if rms_ref else float("nan"),
                "psnr": float(10 * np.log10(1 / mse_t)) if mse_t > 0 else float("inf"),
                "psnr_min": float(min(p["psnr"] for p in per)), "flip": float(np.mean([p["flip"] for p in per]))}
     for p in per:

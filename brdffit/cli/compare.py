@@ -10,6 +10,7 @@ import click
 
 from .._fit_defaults import COMPARE_SOLVERS as DEFAULT_SOLVERS
 from . import EXIT_NOT_CONVERGED, EXIT_OK, check_model, cli
+from ._help import DefaultFrom
 
 
 def _split(values: tuple[str, ...]) -> list[str]:
@@ -54,7 +55,8 @@ def print_wide(console, renderable) -> None:
 @click.argument("source", type=click.Path(path_type=str))
 @click.option("--models", multiple=True, help="Models (repeat or comma-separate) [all base models].")
 @click.option("--solvers", multiple=True, help=f"Solvers [{', '.join(DEFAULT_SOLVERS)}]; also gauss_newton.")
-@click.option("--losses", multiple=True, help="Losses [log].")
+@click.option("--losses", multiple=True, cls=DefaultFrom, default_from="brdffit.fitting.compare:compare(losses)",
+              describe=", ".join, help="Losses.")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [compare-<name>].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
 def compare_command(source, models, solvers, losses, out, force) -> int:

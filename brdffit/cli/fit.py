@@ -63,6 +63,7 @@ class ModelOption(click.Option):
 
 
 # The CLI's defaults are the API's (one set of defaults, a module without heavy imports).
+from .._fit_defaults import COMPOSITE_STARTS as _COMPOSITE_STARTS  # noqa: E402
 from .._fit_defaults import DEFAULT_LOSS as _LOSS  # noqa: E402
 from .._fit_defaults import DEFAULT_MAX_STEPS as _MAX_STEPS  # noqa: E402
 from .._fit_defaults import DEFAULT_SOLVER as _SOLVER  # noqa: E402
@@ -76,8 +77,9 @@ from .._fit_defaults import SOLVERS as _SOLVERS  # noqa: E402
 @click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
 @click.option("--solver", default=_SOLVER, show_default=True, help=" | ".join(_SOLVERS))
 @click.option("--multistart", default=None, type=click.IntRange(min=0),
-              help="Further grid starts solved beside the best one [default: the API's: 0, or 3 for a composite "
-                   "with repeated lobes].")
+              help="Further grid starts solved beside the best one [default: 0"
+                   + (f", or {_COMPOSITE_STARTS - 1} for a composite with repeated lobes" if _COMPOSITE_STARTS > 1 else "")
+                   + "].")
 @click.option("--max-steps", type=click.IntRange(min=1), default=_MAX_STEPS, show_default=True)
 @click.option("--bound", "bound_items", multiple=True, metavar="NAME=LO,HI",
               help="Narrow a parameter's box, e.g. ggx1.alpha=0.01,0.5 (an empty side keeps it). Repeatable.")

@@ -12,7 +12,10 @@ from pathlib import Path
 
 import click
 
+from .._fit_defaults import DEFAULT_LOSS as _LOSS
+from .._fit_defaults import LOSSES as _LOSSES
 from . import EXIT_NOT_CONVERGED, EXIT_OK, cli
+from ._help import DefaultFrom
 
 
 def _region(text: str | None):
@@ -30,8 +33,9 @@ def _region(text: str | None):
 @cli.command("fit-btf")
 @click.argument("folder", type=click.Path(path_type=str))
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx.")
-@click.option("--loss", default="log", show_default=True, help="l2 | cosine_l2 | log | cbrt | relative")
-@click.option("--solver", default=None, help="Solver of fit_batch [its default].")
+@click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
+@click.option("--solver", default=None, cls=DefaultFrom, default_from="brdffit.fitting.batch:fit_batch(solver)",
+              help="Solver of fit_batch.")
 @click.option("--region", default=None, help="ROW0,ROW1,COL0,COL1 of the photographs (slice bounds).")
 @click.option("--step", type=click.IntRange(1), default=1, show_default=True, help="Fit every STEP-th texel.")
 @click.option("--includes-cos", is_flag=True, help="Pixel values include cos(theta_light).")

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from . import cli
+from ._help import DefaultFrom
 
 
 def _since_process_start() -> float | None:
@@ -32,7 +33,8 @@ def _since_process_start() -> float | None:
 @click.option("--lights", "n_lights", type=click.IntRange(1, 64), default=5, show_default=True,
               help="Number of light directions (theta 0..75 degrees).")
 @click.option("--size", type=click.IntRange(8, 4096), default=256, show_default=True, help="Image size in pixels.")
-@click.option("--spp", type=click.IntRange(1, 1024), default=None, help="Samples per pixel [default: 4].")
+@click.option("--spp", type=click.IntRange(1, 1024), default=None, cls=DefaultFrom,
+              default_from="brdffit.render.scene:DEFAULT_SPP", help="Samples per pixel.")
 def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lights: int, size: int, spp: int | None) -> int:
     """Render the fit in FIT.json and the reference SOURCE on spheres under a light sweep; write
     linear EXRs, PNG panels (reference | fit | error), the 81x81 table panel and metrics.json."""
@@ -78,7 +80,7 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
 
     o = v.metrics["overall"]
     line = (f"{out_path}: {len(v.files)} files; rmse {fm(o['rmse'], '.4g')}, relative rmse "
-            f"{fm(o['relative_rmse'], '.3g')}, psnr {fm(o['psnr'], '.2f')} dB, flip {fm(o['flip'], '.4f')}")
+            f"{fm(o['rel_rmse'], '.3g')}, psnr {fm(o['psnr'], '.2f')} dB, flip {fm(o['flip'], '.4f')}")
     if any(o[k] != o[k] for k in ("rmse", "psnr", "flip")):
         line += " (n/a: the rendered images hold values that are not finite numbers)"
     click.echo(line)

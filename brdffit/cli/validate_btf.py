@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from . import cli
+from ._help import DefaultFrom
 
 
 def _pairs(text: str | None):
@@ -26,7 +27,8 @@ def _pairs(text: str | None):
 @cli.command("validate-btf")
 @click.argument("folder", type=click.Path(path_type=str))
 @click.argument("params", metavar="PARAMS.exr", type=click.Path(path_type=str))
-@click.option("--pairs", default=None, help="TL,PL,TV,PV;... (degrees) [5 pairs from head-on to grazing].")
+@click.option("--pairs", default=None, cls=DefaultFrom, default_from="brdffit.btf.validate:DEFAULT_PAIRS_DEG",
+              describe=lambda pairs: f"{len(pairs)} pairs from head-on to grazing", help="TL,PL,TV,PV;... (degrees).")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path),
               help="Output folder [validate-btf beside PARAMS.exr].")
 @click.option("--force", is_flag=True, help="Replace an existing output folder.")
@@ -49,6 +51,6 @@ def validate_btf_command(folder, params, pairs, out, force, cache_dir) -> int:
                    scale=o.get("scale", 1.0), srgb=o.get("srgb", True), cache_dir=cache_dir, progress=True)
     v = validate_btf(btf, maps, chosen, out=out, force=force)
     ov = v.metrics["overall"]
-    click.echo(f"{out}: {len(v.files)} files; rmse {ov['rmse']:.4g}, relative rmse {ov['relative_rmse']:.3g}, "
+    click.echo(f"{out}: {len(v.files)} files; rmse {ov['rmse']:.4g}, relative rmse {ov['rel_rmse']:.3g}, "
                f"psnr {ov['psnr']:.2f} dB (worst pair {ov['psnr_min']:.2f}), flip {ov['flip']:.4f}")
     return 0

@@ -43,6 +43,6 @@ def validate_scene_cmd(scene: str, material: str, fit_json: str, reference: str,
     with console.status(f"rendering {scene} with {material!r} as the reference and as the fit"):
         v = validate_scene(scene, material, fit, ref, spp=spp, out=out_path, force=force)
     o = v.metrics["image"]
-    click.echo(f"{out_path}: {len(v.files)} files; rmse {o['rmse']:.4g}, relative rmse {o['relative_rmse']:.3g}, "
+    click.echo(f"{out_path}: {len(v.files)} files; rmse {o['rmse']:.4g}, relative rmse {o['rel_rmse']:.3g}, "
                f"psnr {o['psnr']:.2f} dB, flip {o['flip']:.4f}")
     return 0

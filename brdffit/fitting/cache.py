@@ -20,7 +20,10 @@ code, still serves there).
 from __future__ import annotations
 
 import os
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 _STATE = {"dir": None}
 
@@ -266,3 +269,32 @@ def load_or_compile(key, build, example):
     else:
         _prune(file.parent, keep=file)
     return wrap(compiled)
+
+
+#: compiled programs of this process, by (key, argument shapes)
+_CACHE: dict = {}
+
+
+def _shape_key(tree):
+    import jax
+
+    return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
+
+
+def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
+    """Compile ``build()`` for these argument shapes once per process and, through the disk cache,
+    once per machine; returns (compiled function, compile seconds this call).
+
+    On disk (:func:`load_or_compile`): the compiled program itself, so that a second process
+    neither traces (nor imports optimistix), lowers nor compiles it."""
+    full = (key, _shape_key(example))
+    hit = _CACHE.get(full)
+    if hit is not None:
+        return hit, 0.0
+    if note is not None:
+        note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
+    t0 = time.perf_counter()
+    fn = load_or_compile(key, build, example)
+    dt = time.perf_counter() - t0
+    _CACHE[full] = fn
+    return fn, dt

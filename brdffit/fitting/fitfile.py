@@ -30,6 +30,9 @@ _SCALARS: dict[str, tuple[type, ...]] = {
 }
 _COUNTS = ("steps", "n_used", "n_excluded")
 _FLOAT_MAPS = ("metrics", "seconds")
+#: metric names read under today's name: the relative RMSE is ``rel_rmse`` everywhere (SPEC 5, 13);
+#: the image metrics called it ``relative_rmse`` before
+METRIC_ALIASES = {"relative_rmse": "rel_rmse"}
 #: relative slack on recorded bounds: values are written with full precision, this only absorbs
 #: the float32 round trip of a bound that some writer stored
 _SLACK = 1e-9

@@ -256,7 +256,7 @@ def subset(data: Data) -> Data:
 
 def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: int = 1, note=None):
     """The k best grid starts: flat params (k, P), their grid losses (k,), compile s, run s."""
-    from .program import compiled
+    from .cache import compiled
 
     grid = jnp.asarray(grid_for(model, lo, hi, free, anchor))
     args = (grid, subset(data), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool), jnp.asarray(anchor))

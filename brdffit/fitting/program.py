@@ -7,7 +7,7 @@ every loss and metric and J^T J at the solution (the standard errors' need; the 
 returns it from its last step). One dispatch per fit: a warm ggx fit spends its time in the
 solve, not in Python between compiled pieces.
 
-Compiled programs are kept per process and on disk (:func:`compiled`, ``cache``): a second process
+Compiled programs are kept per process and on disk (``cache.compiled``): a second process
 loads the program without tracing it, and without importing optimistix (``solve``).
 
 ``fit_batch`` maps the same program over a batch (``jax.lax.map``: a vmapped solve would run
@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +27,8 @@ from .._fit_defaults import SOLVERS
 from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
-from .cache import cache_enabled, load_or_compile
+# compiled: the per-process and on-disk program cache (``cache``), imported from here too
+from .cache import compiled  # noqa: F401
 from .problem import Data, flat_residual, values_metrics
 
 #: Solvers that run compiled (and vmap): everything but scipy.
@@ -52,32 +51,6 @@ def check_solver(solver: str) -> str:
     if key not in SOLVERS:
         raise UsageError(f"unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
     return key
-
-
-_CACHE: dict = {}
-
-
-def _shape_key(tree):
-    return tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(tree))
-
-
-def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str], None] | None = None) -> tuple[Any, float]:
-    """Compile ``build()`` for these argument shapes once per process and, through the disk cache
-    (``cache``), once per machine; returns (compiled function, compile seconds this call).
-
-    On disk (``cache.load_or_compile``): the compiled program itself, so that a second process
-    neither traces (nor imports optimistix), lowers nor compiles it."""
-    full = (key, _shape_key(example))
-    hit = _CACHE.get(full)
-    if hit is not None:
-        return hit, 0.0
-    if note is not None:
-        note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
-    t0 = time.perf_counter()
-    fn = load_or_compile(key, build, example)
-    dt = time.perf_counter() - t0
-    _CACHE[full] = fn
-    return fn, dt
 
 
 @functools.lru_cache(maxsize=None)

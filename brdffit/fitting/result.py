@@ -10,9 +10,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._providers import provider
 from ..errors import InputError
 from ..models.base import Model
-from .fitfile import check_fit_document, parse_fit_text
+from .fitfile import METRIC_ALIASES, check_fit_document, parse_fit_text
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
@@ -23,13 +24,20 @@ FORMAT = "brdffit.fit/1"
 
 def _eval_compiled(model: Model, p: dict, wi, wo):
     """``model.eval`` as one compiled program per model and shape, kept whole on disk like the fit
-    programs (``program.compiled``): a second process (``brdffit fit`` drawing fit.png) loads it
+    programs (``cache.compiled``): a second process (``brdffit fit`` drawing fit.png) loads it
     without tracing or lowering it. Evaluated op by op it compiled ~60 small programs per process;
     jitted, its tracing and lowering cost ~0.2 s of every ``brdffit fit``."""
-    from .program import compiled  # the fitting programs' module: not needed to read a fit file
+    from .cache import compiled  # JAX's compilation: not needed to read a fit file
 
     fn, _ = compiled(("eval", model), lambda: model.eval, p, wi, wo)
     return fn(p, wi, wo)
+
+
+def _metrics(recorded: dict) -> dict[str, float]:
+    """A fit file's metrics, an old name read as today's (``fitfile.METRIC_ALIASES``) unless both
+    are present."""
+    out = {k: float(v) for k, v in recorded.items() if METRIC_ALIASES.get(k) not in recorded}
+    return {METRIC_ALIASES.get(k, k): v for k, v in out.items()}
 
 
 def _floats(a) -> list[float]:
@@ -104,9 +112,8 @@ class FitResult:
     # -- Jupyter --------------------------------------------------------------------------------------
     def _repr_png_(self) -> bytes:
         """The fitted model on the UBO-81 grid (:func:`brdffit.plot.table`)."""
-        from ..plot import png_bytes, table
-
-        return png_bytes(table(self))
+        # figures, renderers and material files are higher layers: brdffit/_providers.py
+        return provider("fit_png")(self)
 
     def _repr_html_(self) -> str:
         import base64
@@ -134,26 +141,21 @@ class FitResult:
         """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (SPEC 8): for
         a ``mitsuba:*`` fit Mitsuba's own plugin (``model.native``), otherwise the ``brdffit`` plugin
         with the same JAX formula (see :mod:`brdffit.render.export`)."""
-        from ..render.export import mitsuba_bsdf
-
-        return mitsuba_bsdf(self)
+        return provider("fit_to_mitsuba")(self)
 
     def convert(self, model: str | Model, **options) -> "FitResult":
         """This fit as ``model`` (a native model: ``mitsuba:roughplastic``, ``gltf:metallic_roughness``,
         ...): ``model`` fitted to this fit's BRDF on the UBO-81 grid, the conversion error in
         ``options["converted_from"]`` (SPEC 13; :func:`brdffit.materials.convert`)."""
-        from ..materials import convert
-
-        return convert(self, model, **options)
+        return provider("fit_convert")(self, model, **options)
 
     def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
                force: bool = False) -> "FitResult":
         """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
         ``.glb``/``.gltf`` glTF 2.0 (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
         fit is converted first; returns the fit written."""
-        from ..materials import export
-
-        return export(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id, force=force)
+        return provider("fit_export")(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id,
+                                      force=force)
 
     # -- JSON -------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -218,7 +220,7 @@ class FitResult:
             params={k: np.asarray(v, dtype=np.float64) for k, v in checked.items()},
             loss=d.get("loss", ""),
             loss_value=float(d.get("loss_value", float("nan"))),
-            metrics={k: float(v) for k, v in d.get("metrics", {}).items()},
+            metrics=_metrics(d.get("metrics", {})),
             steps=int(d.get("steps", 0)),
             converged=bool(d.get("converged", False)),
             status=str(d.get("status", "")),

@@ -37,9 +37,7 @@ from ..models.base import Model, _fold
 from . import losses as L
 from .linalg import inverse_quadratic_form, spd_solve
 from .problem import Data, flat_residual
-# Re-exported: solver names, statuses and the compile cache live where no optimistix import is
-# needed (a second process runs a cached program without importing optimistix).
-from .program import COMPILED_SOLVERS, STATUS_TEXT, check_solver, compiled  # noqa: F401
+from .cache import compiled
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Array, Bool, Float, Int

@@ -139,12 +139,27 @@ def save(m: Measurement, path: str | os.PathLike, *, force: bool = False) -> Pat
     return path
 
 
-def resample(source, grid: str = "ubo81", **options) -> Measurement:
-    """A UBO-81 measurement from a Measurement or a path (see :mod:`brdffit.io.resampling`)."""
+def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, progress: bool = False, **options) -> Measurement:
+    """A UBO-81 Measurement from a Measurement or a path (see :mod:`brdffit.io.resampling`)."""
     # (the module is not called ``resample``: importing it would shadow this function)
-    from .resampling import resample as _resample
+    from .resampling import EVALUABLE, interpolate_scattered
 
-    return _resample(source, grid=grid, **options)
+    if grid != "ubo81":
+        raise UsageError(f"unknown grid {grid!r}; supported: 'ubo81'")
+    if isinstance(source, str | os.PathLike):
+        fmt = detect_format(source)
+        m = load(source, progress=progress, **options)  # evaluable sources come back on the UBO-81 grid
+        if fmt in EVALUABLE and m.grid == "ubo81":
+            return m
+    elif isinstance(source, Measurement):
+        if options:
+            raise UsageError(f"options {sorted(options)} apply only when resampling a path")
+        m = source
+    else:
+        raise UsageError(f"resample() takes a Measurement or a path, not {type(source).__name__}")
+    if m.grid == "ubo81":
+        return m
+    return interpolate_scattered(m, reciprocal=reciprocal)
 
 
 def summary(m: Measurement) -> dict:

@@ -23,11 +23,9 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from ..errors import InputError, UsageError
+from ..errors import InputError
 from ..grid import cartesian_to_spherical, ubo_pairs
 from ..measurement import Measurement
 
@@ -99,26 +97,4 @@ def interpolate_scattered(m: Measurement, *, reciprocal: bool = True) -> Measure
     )
 
 
-def resample(source, grid: str = "ubo81", *, reciprocal: bool = True, progress: bool = False, **options) -> Measurement:
-    """A UBO-81 Measurement from a Measurement or a path (see the module docstring)."""
-    from . import detect_format, load
-
-    if grid != "ubo81":
-        raise UsageError(f"unknown grid {grid!r}; supported: 'ubo81'")
-    if isinstance(source, str | os.PathLike):
-        fmt = detect_format(source)
-        m = load(source, progress=progress, **options)  # evaluable sources come back on the UBO-81 grid
-        if fmt in EVALUABLE and m.grid == "ubo81":
-            return m
-    elif isinstance(source, Measurement):
-        if options:
-            raise UsageError(f"options {sorted(options)} apply only when resampling a path")
-        m = source
-    else:
-        raise UsageError(f"resample() takes a Measurement or a path, not {type(source).__name__}")
-    if m.grid == "ubo81":
-        return m
-    return interpolate_scattered(m, reciprocal=reciprocal)
-
-
-__all__ = ["isotropic_coords", "interpolate_scattered", "resample"]
+__all__ = ["isotropic_coords", "interpolate_scattered"]

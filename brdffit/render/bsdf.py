@@ -35,6 +35,9 @@ from pathlib import Path
 import numpy as np
 
 from .._mitsuba import evaluated_calls, mitsuba
+# Evaluating outside a render (a model's jitted formula, any Mitsuba BSDF) is in .evaluate, which
+# the sampler imports too; these names stay importable from here.
+from .evaluate import CHUNK, SMALL, _WARM, _jitted_eval, eval_bsdf, eval_model  # noqa: F401
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
@@ -44,11 +47,6 @@ if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed
 BrdfFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-#: Fixed length of the arrays handed to the jitted model: one compilation per model serves every
-#: render and table (Mitsuba hands over a different number of lanes for each light). Calls with at
-#: most SMALL directions (the scalar variant: one per call) use a second, small shape.
-CHUNK = 1 << 16
-SMALL = 16
 #: Seconds each model compilation took (in the background), for the time report of a validation.
 COMPILE_SECONDS: list[float] = []
 
@@ -68,19 +66,6 @@ def import_native() -> None:
     user_mitsuba()
     import flip_evaluator  # noqa: F401
     import OpenEXR  # noqa: F401
-
-
-@functools.cache
-def _jitted_eval(model):
-    """``model.eval`` jitted with the parameters as an argument: one compilation per model serves
-    every parameter set (the fit, and the isolated lobes the sampler weighs)."""
-    import jax
-
-    return jax.jit(model.eval)
-
-
-#: (model, length) pairs compiled or being compiled in the background, and their threads.
-_WARM: dict = {}
 
 
 def model_brdf(model, params) -> BrdfFn:
@@ -115,29 +100,6 @@ def model_brdf(model, params) -> BrdfFn:
         return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out[:, :3]
 
     return brdf
-
-
-def eval_model(model, params, wi, wo) -> np.ndarray:
-    """(N, channels) f_r of ``model`` at ``params`` (checked), through the compiled CHUNK shape."""
-    import jax.numpy as jnp
-
-    warm = _WARM.get(model)
-    if warm is not None and warm.is_alive():
-        warm.join()  # one compilation, not two racing ones
-    f = _jitted_eval(model)
-    wi = np.asarray(wi, np.float64).reshape(-1, 3)
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    n = wi.shape[0]
-    out = np.empty((n, model.channels))
-    length = SMALL if n <= SMALL else CHUNK
-    for start in range(0, n, length):
-        stop = min(n, start + length)
-        a = np.tile(np.array([[0.0, 0.0, 1.0]]), (length, 1))
-        b = a.copy()
-        a[: stop - start] = wi[start:stop]
-        b[: stop - start] = wo[start:stop]
-        out[start:stop] = np.asarray(f(params, jnp.asarray(a), jnp.asarray(b)))[: stop - start]
-    return out
 
 
 def _vec_to_numpy(v) -> np.ndarray:
@@ -272,46 +234,14 @@ def callback_bsdf(brdf: BrdfFn | None, label: str = "callback", mixture=None, uv
 
 def measured_bsdf(path: str | Path):
     """Mitsuba's built-in ``measured`` plugin for an RGL ``.bsdf`` file, verified before the plugin
-    reads it (:func:`brdffit.io.rgl.load_measured`)."""
+    reads it (:func:`brdffit.render.measured.load_measured`)."""
     from ..errors import InputError
-    from ..io.rgl import load_measured
+    from .measured import load_measured
 
     path = Path(path)
     if not path.is_file():
         raise InputError(str(path), "no such file")
     return load_measured(path)
-
-
-def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
-    """f_r(wi = light, wo = view) of any Mitsuba BSDF at local directions, in 1/sr (cosine removed).
-
-    This is how a ``measured`` RGL reference is evaluated outside a render (the 81x81 table panel,
-    the closed-form agreement test), in the order Mitsuba renders it (SPEC 3).
-    """
-    mi = mitsuba()
-    wi = np.asarray(wi, np.float64).reshape(-1, 3)
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    n = wi.shape[0]
-    if mi.variant().startswith("scalar"):
-        out = np.zeros((n, 3))
-        ctx = mi.BSDFContext()
-        for k in range(n):
-            si = mi.SurfaceInteraction3f()
-            si.wi = mi.Vector3f(*wo[k])
-            si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-            v = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
-            out[k] = np.array([v[0], v[1], v[2]], np.float64)
-    else:
-        import drjit as dr
-
-        si = dr.zeros(mi.SurfaceInteraction3f, n)  # every field defined, at the batch's width
-        si.wi = mi.Vector3f(*(mi.Float(wo[:, c].astype(np.float32)) for c in range(3)))
-        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-        with evaluated_calls():
-            v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(mi.Float(wi[:, c].astype(np.float32)) for c in range(3))))
-        out = np.stack([np.asarray(v[c], np.float64) for c in range(3)], -1).reshape(n, 3)
-    cos_l = wi[:, 2:3]
-    return np.where(cos_l > 0, out / np.where(cos_l > 0, cos_l, 1.0), 0.0)
 
 
 class Source:
@@ -408,11 +338,11 @@ def as_source(obj) -> Source:
 
             check_tensor_file(path)  # bad input is reported now, before any work
             return Source("rgl", path.stem, path=path)
-        import brdffit
+        from ..io import load, resample
 
-        m = brdffit.load(path)
+        m = load(path)
         if m.grid != "ubo81":
-            m = brdffit.resample(m, grid="ubo81")
+            m = resample(m, grid="ubo81")
         src = as_source(m)
         src.label = path.stem
         return src

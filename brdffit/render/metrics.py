@@ -2,7 +2,7 @@
 
 - ``rmse``: root mean square difference of the linear radiance over the pixels on the disc (all
   channels), in the units of the render (radiance per unit irradiance times ``irradiance``).
-- ``relative_rmse``: ``rmse`` divided by the RMS of the reference over the same pixels.
+- ``rel_rmse``: ``rmse`` divided by the RMS of the reference over the same pixels.
 - ``psnr``: of the tone-mapped images (:func:`tonemap`), in dB, peak 1, over the disc.
 - ``flip``: mean LDR-FLIP (NVIDIA's ``flip-evaluator`` package) of the tone-mapped images over
   the disc, in [0, 1], lower is better.
@@ -48,7 +48,7 @@ def luminance(img: np.ndarray) -> np.ndarray:
 def image_metrics(
     reference: Float[np.ndarray, "H W 3"], test: Float[np.ndarray, "H W 3"], mask: np.ndarray, scale: float | None = None
 ) -> dict[str, float]:
-    """rmse, relative_rmse, psnr, flip of one image pair over the ``mask`` pixels."""
+    """rmse, rel_rmse, psnr, flip of one image pair over the ``mask`` pixels."""
     import flip_evaluator
 
     ref = np.asarray(reference, np.float64)
@@ -67,7 +67,7 @@ def image_metrics(
     fmap = np.asarray(fmap).reshape(ref.shape[:2])
     out = {
         "rmse": rmse,
-        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "rel_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
         "psnr": psnr,
         "flip": float(np.mean(fmap[m])),
         "_flip_map": fmap,
@@ -76,7 +76,7 @@ def image_metrics(
     if not (np.all(np.isfinite(ref[m])) and np.all(np.isfinite(tst[m]))):
         # The tone mapper clips inf and NaN to displayable values, so PSNR and FLIP would read as a
         # perfect match of images that hold no numbers (issue 28): none of them can be computed.
-        out.update(rmse=float("nan"), relative_rmse=float("nan"), psnr=float("nan"), flip=float("nan"),
+        out.update(rmse=float("nan"), rel_rmse=float("nan"), psnr=float("nan"), flip=float("nan"),
                    _mse_tonemapped=float("nan"))
     return out
 
@@ -92,7 +92,7 @@ def summarise(per_light: list[dict], reference: np.ndarray, test: np.ndarray, ma
         rmse = float("nan")
     return {
         "rmse": rmse,
-        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "rel_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
         # NaN (a light whose images hold no numbers) stays NaN: never a perfect-looking inf
         "psnr": float(10 * np.log10(1.0 / mse_t)) if mse_t > 0 else (float("inf") if mse_t == 0 else float("nan")),
         "flip": float(np.mean([p["flip"] for p in per_light])),
@@ -127,7 +127,7 @@ def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) 
     lrmse = log_rmse(np.where(valid, fit_t, 0.0), np.where(valid, ref_t, 0.0), cos_l, used)
     return {
         "rmse": rmse,
-        "relative_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
+        "rel_rmse": rmse / ref_rms if ref_rms > 0 else float("nan"),
         "log_rmse": float(lrmse),
         "valid_pairs": int(np.count_nonzero(np.all(valid, axis=-1) if valid.ndim == 3 else valid)),
     }

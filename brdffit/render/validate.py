@@ -10,7 +10,7 @@ Written files (in ``out``, atomically: the folder appears complete or not at all
   (:func:`brdffit.plot.compare_table`); ``table_reference.exr`` and
   ``table_fit.exr``: the two tables (rows light, columns view, f_r in 1/sr; entries a measured
   table marks invalid are NaN in the reference table and left out of the table metrics).
-- ``metrics.json``: rmse, relative_rmse, psnr, flip per light and overall (see
+- ``metrics.json``: rmse, rel_rmse, psnr, flip per light and overall (see
   :mod:`brdffit.render.metrics`), the table metrics, the settings and where the time went.
 """
 
@@ -248,7 +248,7 @@ def validate(
         if tmp is not None:
             fig = plot.compare_table(tab_ref, tab_fit, title=(
                 f"UBO-81 table, {fit_src.label} against {ref_src.label}: RMSE {table['rmse']:.3g} 1/sr   "
-                f"rel. RMSE {table['relative_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
+                f"rel. RMSE {table['rel_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
             fig.savefig(tmp / "table.png", dpi=90)
             files.append(Path(out) / "table.png")
             tell("panels", len(dirs) + 1, len(dirs) + 1)

@@ -7,7 +7,7 @@ an RGL ``.bsdf`` through Mitsuba's ``measured`` plugin.
 
 ``validate_scene`` writes (in ``out``, atomically: the folder appears complete or not at all):
 ``reference.exr`` and ``fit.exr`` (linear radiance, 32-bit float RGB), ``panel.png`` (reference |
-fit | FLIP error map) and ``metrics.json`` (rmse, relative_rmse, psnr, flip over the whole image,
+fit | FLIP error map) and ``metrics.json`` (rmse, rel_rmse, psnr, flip over the whole image,
 with the tone mapping of :mod:`brdffit.render.metrics`; the settings; the time per stage).
 """
 

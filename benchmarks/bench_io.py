@@ -1,4 +1,4 @@
-"""Timings of the readers and writers: ``python -m brdffit.io._bench [DATA_DIR]``.
+"""Timings of the readers and writers: ``.venv/bin/python benchmarks/bench_io.py [DATA_DIR]``.
 
 Prints best-of-n wall times (after one warm-up call) for each format; DATA_DIR defaults to
 ``../shared/data`` (or $BRDFFIT_DATA). Real files that are absent are skipped.
@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     from brdffit.io.images import direction_name
 
     argv = sys.argv[1:] if argv is None else argv
-    root = Path(argv[0] if argv else os.environ.get("BRDFFIT_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+    root = Path(argv[0] if argv else os.environ.get("BRDFFIT_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
     rgl = sorted((root / "measured" / "rgl").glob("*.bsdf"))
     cornell = sorted((root / "measured" / "cornell").glob("*.brdf"))
     tmp = Path(tempfile.mkdtemp(prefix="brdffit-bench-"))

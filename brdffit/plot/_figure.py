@@ -9,7 +9,7 @@ import os
 import matplotlib
 from matplotlib.figure import Figure as _MplFigure
 
-from .plot import PNG_COMPRESS_LEVEL, png_bytes
+from .style import PNG_COMPRESS_LEVEL, png_bytes
 
 
 class Figure(_MplFigure):
