@@ -14,6 +14,10 @@ if [ -e "$STAMP" ]; then
     exit 0
 fi
 ver=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+if [ "$ver" != "3.11" ] && command -v python3.11 >/dev/null 2>&1; then
+    PYTHON=python3.11  # bpy 5.0 wheels exist for CPython 3.11 only
+    ver=3.11
+fi
 if [ "$ver" != "3.11" ]; then
     echo "setup-blender: warning: bpy 5.0.1 needs CPython 3.11 ($PYTHON is $ver); Blender tests will be skipped"
     exit 0
