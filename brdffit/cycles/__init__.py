@@ -197,22 +197,31 @@ def _dirs(a, name: str) -> np.ndarray:
     return a
 
 
-def gonio(material: dict, wi, wo, irradiance: float = 1.0) -> np.ndarray:
+def _material(material) -> dict:
+    """Request arguments naming a material: a native dict, or (path to a .blend file, material name)."""
+    if isinstance(material, dict):
+        return {"material": material}
+    path, name = material
+    return {"blend": [str(Path(path).resolve()), str(name)]}
+
+
+def gonio(material, wi, wo, irradiance: float = 1.0) -> np.ndarray:
     """Cycles measured as a gonioreflectometer: (N, 3) radiance f(wi, wo) (n.wi) E of a large plane
-    (normal +z) with ``material`` (a ``blender:principled`` native dict) under a sun of angle 0
-    towards wi, seen by an orthographic camera from wo. NaN where wi or wo is below the horizon."""
+    (normal +z) with ``material`` (a ``blender:principled`` native dict, or a (.blend path, material
+    name) pair) under a sun of angle 0 towards wi, seen by an orthographic camera from wo. NaN where
+    wi or wo is below the horizon."""
     wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
     if wi.shape != wo.shape:
         raise UsageError(f"wi and wo differ in shape: {wi.shape} and {wo.shape}")
     pairs = np.stack([wi, wo], 1).tolist()
-    return _load("gonio", {"material": material, "pairs": pairs, "irradiance": float(irradiance)}, "values")
+    return _load("gonio", {**_material(material), "pairs": pairs, "irradiance": float(irradiance)}, "values")
 
 
-def render_sphere(material: dict, lights, size: int = 256, irradiance: float = 1.0, spp: int = 4,
+def render_sphere(material, lights, size: int = 256, irradiance: float = 1.0, spp: int = 4,
                   seed: int = 0) -> np.ndarray:
-    """(L, size, size, 3) linear radiance of the unit sphere with ``material`` in Cycles, one image per
-    light (unit world directions towards the lights), in the SPEC 6 framing; not masked."""
-    args = {"material": material, "lights": _dirs(lights, "lights").tolist(), "size": int(size),
+    """(L, size, size, 3) linear radiance of the unit sphere with ``material`` (as :func:`gonio`) in
+    Cycles, one image per light (unit world directions towards the lights), SPEC 6 framing; not masked."""
+    args = {**_material(material), "lights": _dirs(lights, "lights").tolist(), "size": int(size),
             "irradiance": float(irradiance), "spp": int(spp), "seed": int(seed)}
     return _load("sphere", args, "images")
 

@@ -103,6 +103,19 @@ def principled_material(native, name="brdffit"):
     return mat
 
 
+def material_of(args):
+    """The request's material: ``"material"``, a native dict, or ``"blend": [path, name]``, a
+    material appended from a .blend file (what a user of an exported file renders)."""
+    if "blend" in args:
+        path, name = args["blend"]
+        with bpy.data.libraries.load(path, link=False) as (source, target):
+            if name not in source.materials:
+                raise Refused(f"{path}: no material {name!r}; it has {', '.join(source.materials) or 'none'}")
+            target.materials = [name]
+        return target.materials[0]
+    return principled_material(args["material"])
+
+
 def add_sun(sc, irradiance):
     light = bpy.data.lights.new("sun", "SUN")
     light.angle = 0.0  # a delta light: one direction
@@ -161,7 +174,7 @@ def op_gonio(args, out):
     sc = cycles_scene(size, size, int(args.get("spp", 1)))
     bpy.ops.mesh.primitive_plane_add(size=1000.0)
     plane = bpy.context.active_object
-    plane.data.materials.append(principled_material(args["material"]))
+    plane.data.materials.append(material_of(args))
     sun = add_sun(sc, args.get("irradiance", 1.0))
     cam = add_camera(sc, 0.01)  # a 1 cm window on the plane, far from its edges at any angle
     values = np.zeros((len(wi), 3), np.float32)
@@ -184,7 +197,7 @@ def op_sphere(args, out):
     size = int(args["size"])
     reset()
     sc = cycles_scene(size, size, int(args.get("spp", 4)))
-    mat = principled_material(args["material"])
+    mat = material_of(args)
     mesh = bpy.data.meshes.new("anchor")
     mesh.from_pydata([(0.0, 0.0, 0.0)], [], [])
     ball = bpy.data.objects.new("ball", mesh)
