@@ -19,6 +19,7 @@ LAMBERT = {"distribution": "GGX", "inputs": {"Base Color": [0.8, 0.5, 0.2], "Met
 def test_without_an_environment_every_path_says_so_in_one_line(monkeypatch, tmp_path):
     monkeypatch.delenv(cycles.ENV_VAR, raising=False)
     monkeypatch.setattr(cycles, "project_root", lambda: tmp_path)
+    monkeypatch.setattr(cycles, "_SHARED", None)  # as in a process that has not started one
     for call in (cycles.blender_python, cycles.worker,
                  lambda: cycles.gonio(LAMBERT, [[0, 0, 1]], [[0, 0, 1]]),
                  lambda: cycles.render_sphere(LAMBERT, [[0, 0, 1]], size=8)):
