@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test bench clean mutation mutation-by-hand
+.PHONY: setup setup-blender demo test bench clean mutation mutation-by-hand
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	PYTHON=$(PYTHON) bash scripts/setup.sh
@@ -11,10 +11,16 @@ $(STAMP): pyproject.toml scripts/setup.sh
 
 setup: $(STAMP)
 
+# Blender (bpy 5.0.1, numpy < 2) in an environment of its own, .venv-blender (SPEC 13): the tests of
+# the Cycles renderer and the .blend export run in it; `make demo` does not need it. The script is
+# idempotent (a stamp file inside .venv-blender) and only warns where bpy cannot be installed.
+setup-blender:
+	PYTHON=$(PYTHON) bash scripts/setup_blender.sh
+
 demo: $(STAMP)
 	$(VENV)/bin/brdffit demo -o out/demo --force
 
-test: $(STAMP)
+test: $(STAMP) setup-blender
 	$(VENV)/bin/python -m pytest -n 2 --dist loadfile -q
 
 bench: $(STAMP)
@@ -49,4 +55,4 @@ mutation-by-hand: $(STAMP)
 	$(VENV)/bin/python scripts/mutation_by_hand.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .hypothesis mutants
+	rm -rf $(VENV) .venv-blender out .pytest_cache .hypothesis mutants

@@ -73,3 +73,15 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if tally:
         cases, passed, runs = tally
         terminalreporter.write_line(f"malformed-input corpus: {passed}/{cases} cases passed ({runs} CLI runs)")
+
+
+@pytest.fixture(scope="session")
+def blender():
+    """``brdffit.cycles`` where a Blender environment is there (``make test`` creates .venv-blender);
+    else the test is skipped with the one line that says what is missing."""
+    from brdffit import cycles
+
+    missing = cycles.available()
+    if missing:
+        pytest.skip(f"needs Blender (bpy 5.0 in .venv-blender): {missing}")
+    return cycles

@@ -38,6 +38,8 @@ CONFIGS = {
                          "ggx2.ks": 0.6, "ggx2.alpha": 0.7, "ggx2.f0": 0.9}],
     "gltf:metallic_roughness": [{"base_color": [0.6, 0.4, 0.2], "metallic": m, "roughness": r}
                                 for m, r in ((0.0, 0.5), (1.0, 0.3), (0.5, 0.8))],
+    "blender:principled": [{"base_color": [0.6, 0.4, 0.2], "metallic": m, "roughness": r, "ior": 1.5,
+                            "specular_tint": 1.0} for m, r in ((0.0, 0.5), (1.0, 0.3))],
     "lafortune2": [{"kd": 0.1, "rho1": 2.0, "cx1": -1.0, "cz1": 1.0, "n1": 5.0, "rho2": 10.0, "cx2": -1.0, "cz2": 0.95, "n2": 20.0}],
 }
 

@@ -62,6 +62,8 @@ RANGES: dict[str, dict[str, tuple]] = {
     "mitsuba:roughplastic": {"diffuse_reflectance": ALB, "alpha": ROUGH, "int_ior": (1.3, 2.0),
                              "specular_reflectance": (0.5, 1.0)},
     "gltf:metallic_roughness": {"base_color": (0.2, 0.9), "metallic": (0.1, 0.9), "roughness": (0.3, 0.7)},
+    "blender:principled": {"base_color": (0.2, 0.9), "metallic": (0.1, 0.9), "roughness": (0.3, 0.7),
+                           "ior": (1.3, 2.0), "specular_tint": (0.5, 1.0)},
 }
 
 #: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run.

@@ -29,6 +29,8 @@ SPEC13 = {
     "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3)),
     "mitsuba:roughplastic": (("diffuse_reflectance", 3), ("alpha", 1), ("int_ior", 1), ("specular_reflectance", 3)),
     "gltf:metallic_roughness": (("base_color", 3), ("metallic", 1), ("roughness", 1)),
+    "blender:principled": (("base_color", 3), ("metallic", 1), ("roughness", 1), ("ior", 1),
+                           ("specular_tint", 1)),
 }
 
 
@@ -298,7 +300,7 @@ def test_lookup_errors_name_the_known_models_and_what_lobes_applies_to():
     with pytest.raises(KeyError) as err:
         get("lambert+nosuch")
     assert err.value.args[0] == f"unknown model 'nosuch' in 'lambert+nosuch'; known: {', '.join(names())}"
-    assert "ashikhmin_shirley, blinn_phong, cook_torrance" in err.value.args[0]
+    assert "ashikhmin_shirley, blender:principled, blinn_phong, cook_torrance" in err.value.args[0]
     with pytest.raises(KeyError) as err:
         get("ggx", lobes=2)
     assert err.value.args[0] == "lobes= applies to 'lafortune' only, not 'ggx'"

@@ -1,4 +1,4 @@
-"""``brdffit validate SOURCE FIT.json [-o DIR]``: Mitsuba renders, panels, metrics (SPEC 6, 7)."""
+"""``brdffit validate SOURCE FIT.json [-o DIR] [--renderer cycles]``: renders, panels, metrics (SPEC 6, 7, 13)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,11 @@ def _since_process_start() -> float | None:
 @click.option("--size", type=click.IntRange(8, 4096), default=256, show_default=True, help="Image size in pixels.")
 @click.option("--spp", type=click.IntRange(1, 1024), default=None, cls=DefaultFrom,
               default_from="brdffit.render.scene:DEFAULT_SPP", help="Samples per pixel.")
-def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lights: int, size: int, spp: int | None) -> int:
+@click.option("--renderer", type=click.Choice(["mitsuba", "cycles"]), default="mitsuba", show_default=True,
+              help="What renders the fit: Mitsuba, or Blender's Cycles (a blender:principled fit; needs "
+                   ".venv-blender). The reference is always rendered by Mitsuba.")
+def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lights: int, size: int, spp: int | None,
+                 renderer: str) -> int:
     """Render the fit in FIT.json and the reference SOURCE on spheres under a light sweep; write
     linear EXRs, PNG panels (reference | fit | error), the 81x81 table panel and metrics.json."""
     t0 = time.perf_counter()
@@ -62,6 +66,10 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
 
         # FIT.json is a fit file whatever its name: checked as one (not guessed as a measurement)
         fit = as_fit(FitResult.from_json(Path(fit_json)))  # the small file first: a bad one costs nothing
+        if renderer == "cycles":
+            from ..render.cycles import cycles_material
+
+            cycles_material(fit)  # a fit Cycles cannot render: one line, before reading the reference
         reference = as_source(source)
 
         t_import = time.perf_counter() - t0
@@ -75,7 +83,7 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
                     bar.update(tasks[stage], completed=k, total=n)
 
             v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
-                         spp=spp or DEFAULT_SPP, progress=progress)
+                         spp=spp or DEFAULT_SPP, progress=progress, renderer=renderer)
     from ..render.metrics import format_metric as fm
 
     o = v.metrics["overall"]

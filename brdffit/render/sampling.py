@@ -100,8 +100,8 @@ def _base_lobes(name: str, p, q) -> list[Lobe]:
         a = p("alpha")
         diffuse = [Lobe("cosine", scales=s("diffuse_reflectance"))] if q("diffuse_reflectance") else []
         return diffuse + [Lobe("ggx", (a, a), s("specular_reflectance") if q("specular_reflectance") else ())]
-    if name == "gltf:metallic_roughness":
-        a = p("roughness") ** 2  # glTF's alpha; the diffuse share is what base_color adds
+    if name in ("gltf:metallic_roughness", "blender:principled"):
+        a = p("roughness") ** 2  # alpha = roughness^2 in both; the diffuse share is what base_color adds
         return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0)]
     return [Lobe("cosine", scales=s("kd"))]  # an unknown model: cosine sampling (valid, not fast)
 

@@ -145,6 +145,7 @@ def render_sphere(
     spp: int = DEFAULT_SPP,
     seed: int = 0,
     progress=None,
+    renderer: str = "mitsuba",
 ) -> Float[np.ndarray, "L size size 3"]:
     """Linear radiance of the unit sphere under each light, (L, size, size, 3) float32 (SPEC 6).
 
@@ -152,18 +153,27 @@ def render_sphere(
     RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the
     lights (L, 3), or (theta, phi) pairs in radians (L, 2). ``irradiance``: on a surface facing the
     light. ``spp``: samples per pixel (stratified when a square). ``progress(k, L)`` is called
-    after each image.
+    after each image. ``renderer``: "mitsuba" (any source) or "cycles" (a ``blender:principled``
+    fit, rendered by Blender's Cycles with its own Principled BSDF: :mod:`brdffit.render.cycles`).
 
     An isotropic BRDF renders f_r(l, v) (n.l) irradiance with n = (x, y, sqrt(1 - x^2 - y^2)),
     v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,
     pointing right at the image centre; see the module docstring).
     """
+    from .cycles import check_renderer
+
     dirs = light_directions(lights)  # bad lights (degrees, below the horizon) fail before any work
-    mi = mitsuba()
-    src: Source = as_source(source)
+    renderer = check_renderer(renderer)
     size = int(size)
     if size < 1 or spp < 1:
         raise ValueError("size and spp must be >= 1")
+    if renderer == "cycles":
+        from .cycles import render_sphere_cycles
+
+        return render_sphere_cycles(as_source(source), dirs, size, irradiance, int(spp), int(seed), disc_mask(size),
+                                    progress)
+    mi = mitsuba()
+    src: Source = as_source(source)
     scene = mi.load_dict(scene_dict(src.bsdf, size, int(spp), irradiance, dirs[0]))
     params = mi.traverse(scene)
     mask = disc_mask(size)

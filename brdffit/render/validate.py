@@ -145,6 +145,7 @@ def validate(
     spp: int = DEFAULT_SPP,
     irradiance: float = 1.0,
     progress=None,
+    renderer: str = "mitsuba",
 ) -> Validation:
     """Render ``fit`` and its reference ``source`` under each light, compare, and write the results.
 
@@ -154,7 +155,12 @@ def validate(
     ``lights``: (L, 3) directions or (L, 2) (theta, phi) radians; default :data:`DEFAULT_LIGHTS_DEG`.
     ``out``: folder to write (see the module docstring); nothing is written when None.
     ``progress(stage, k, n)`` is called as the work goes on.
+    ``renderer``: what renders the fit, "mitsuba" or "cycles" (a ``blender:principled`` fit in
+    Blender's Cycles, SPEC 13); the reference is always rendered by Mitsuba.
     """
+    from .cycles import check_renderer, cycles_material
+
+    renderer = check_renderer(renderer)
     seconds: dict[str, float] = {}
     t = time.perf_counter()
 
@@ -179,13 +185,18 @@ def validate(
     ref_src = as_source(source)
     fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
+    if renderer == "cycles":
+        from .. import cycles
+
+        cycles_material(fit_src)  # a fit Cycles cannot render: one line, before any work
+        cycles.worker()  # no Blender environment: one line, before any work
     lap("load")
 
     ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
                              progress=lambda k, n: tell("render reference", k, n))
     lap("render reference")
     fit_imgs = render_sphere(fit_src, dirs, size=size, irradiance=irradiance, spp=spp,
-                             progress=lambda k, n: tell("render fit", k, n))
+                             progress=lambda k, n: tell("render fit", k, n), renderer=renderer)
     lap("render fit")
     compiled = COMPILE_SECONDS[n_compiled:]
 
@@ -196,6 +207,7 @@ def validate(
     # FLIP and NumPy release the GIL: the per-light metrics run in two threads while this thread
     # evaluates the tables, writes the EXRs and draws the panels (which wait for their metrics).
     mask = disc_mask(int(size))
+    fit_label = fit_src.label + (" (Cycles)" if renderer == "cycles" else "")
     scales = [exposure(ref_imgs[k], mask) for k in range(len(dirs))]
     with contextlib.ExitStack() as stack:
         pool = stack.enter_context(ThreadPoolExecutor(2))
@@ -229,7 +241,7 @@ def validate(
             if tmp is not None:
                 tag = _tag(d)
                 fig = plot.sphere_panel(ref_imgs[k], fit_imgs[k], d, metrics=per_light[k], scale=scales[k],
-                                        ref_label=ref_src.label, fit_label=fit_src.label, irradiance=irradiance)
+                                        ref_label=ref_src.label, fit_label=fit_label, irradiance=irradiance)
                 fig.savefig(tmp / f"panel_{tag}.png", dpi=90)
                 files.append(Path(out) / f"panel_{tag}.png")
                 tell("panels", k + 1, len(dirs) + 1)
@@ -238,6 +250,7 @@ def validate(
         metrics = {
             "reference": ref_src.label,
             "fit": fit_src.label,
+            "renderer": renderer,
             "size": int(size),
             "spp": int(spp),
             "irradiance": float(irradiance),
