@@ -61,6 +61,9 @@ RANGES: dict[str, dict[str, tuple]] = {
     "mitsuba:roughconductor": {"alpha": ROUGH, "eta": (0.2, 2.0), "k": (1.0, 5.0)},
     "mitsuba:roughplastic": {"diffuse_reflectance": ALB, "alpha": ROUGH, "int_ior": (1.3, 2.0),
                              "specular_reflectance": (0.5, 1.0)},
+    "mitsuba:principled": {"base_color": (0.2, 0.9), "roughness": (0.3, 0.7), "metallic": (0.05, 0.4),
+                           "specular": (0.3, 1.0), "anisotropic": (0.2, 0.8), "sheen": (0.3, 0.9),
+                           "clearcoat": (0.3, 0.9), "clearcoat_gloss": (0.0, 0.3)},
     "gltf:metallic_roughness": {"base_color": (0.2, 0.9), "metallic": (0.1, 0.9), "roughness": (0.3, 0.7)},
     "blender:principled": {"base_color": (0.2, 0.9), "metallic": (0.1, 0.9), "roughness": (0.3, 0.7),
                            "ior": (1.3, 2.0), "specular_tint": (0.5, 1.0)},
@@ -74,6 +77,9 @@ KNOWN_FAILURES: dict[tuple[str, int], str] = {
     # draw (a fit started at the truth ends at the same loss, 3.69707e-7, and n = 35.92), but there
     # n is 1.9 % and blue rho cz^n 2.2 % from the truth.
     ("lafortune", 2): "the noise draw's minimum lies 2.2 % from the truth in blue rho cz^n (a fit from the truth ends there too)",
+    # As lafortune 2: a fit started at the truth ends at the default fit's loss (1.5554808e-6), with
+    # clearcoat 0.547 for 0.502, so the glossy peak there is 2.7 % above the truth's.
+    ("mitsuba:principled", 1): "the noise draw's minimum lies 2.7 % from the truth in the glossy peak (a fit from the truth ends there too)",
     # A solver-start gap, left open (issue 27's closing note): the default start's grid gives eta and
     # k three shared values each, and these fits converge in another (eta, k) valley of a channel
     # (k = 0 there) whose Fresnel curve matches at the grid's angles only: rel_rmse 0.099 and 0.043.
@@ -111,6 +117,18 @@ def _compared(name: str, params: dict) -> dict[str, np.ndarray]:
             rs = np.abs((c - root) / (c + root)) ** 2
             rp = np.abs((n2 * c - root) / (n2 * c + root)) ** 2
             out[f"F({deg})"] = 0.5 * (rs + rp)
+        return out
+    if name == "mitsuba:principled":
+        # specular, clearcoat and clearcoat_gloss shape the same glossy peak (the dielectric GGX lobe
+        # and the weak GTR1 lobe beside it): at 1 % noise the fit started at the truth ends 2-18 %
+        # away in them (at the loss of the default fit), so what is compared is the peak they make:
+        # f_r with base_color and sheen 0 at the mirror pairs of the UBO-81 grid (2 %)
+        model = models.get(name)
+        out = {k: np.asarray(params[k], np.float64) for k in ("base_color", "roughness", "metallic",
+                                                                 "anisotropic", "sheen")}
+        glossy = {**params, "base_color": np.zeros(3), "sheen": np.zeros(1)}
+        mirror = np.abs(WI[:, :2] + WO[:, :2]).sum(axis=1) < 1e-9
+        out["glossy peak"] = np.asarray(model.eval(model.check_params(glossy), WI[mirror], WO[mirror]))
         return out
     if name != "lafortune":
         return {k: np.asarray(v, np.float64) for k, v in params.items()}

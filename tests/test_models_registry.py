@@ -28,6 +28,8 @@ SPEC4 = {
 SPEC13 = {
     "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3)),
     "mitsuba:roughplastic": (("diffuse_reflectance", 3), ("alpha", 1), ("int_ior", 1), ("specular_reflectance", 3)),
+    "mitsuba:principled": (("base_color", 3), ("roughness", 1), ("metallic", 1), ("specular", 1), ("anisotropic", 1),
+                           ("sheen", 1), ("clearcoat", 1), ("clearcoat_gloss", 1)),
     "gltf:metallic_roughness": (("base_color", 3), ("metallic", 1), ("roughness", 1)),
     "blender:principled": (("base_color", 3), ("metallic", 1), ("roughness", 1), ("ior", 1),
                            ("specular_tint", 1)),

@@ -12,9 +12,9 @@ import pytest
 
 import brdffit
 import brdffit.models as models
-from brdffit.models import mitsuba_roughconductor, mitsuba_roughplastic
+from brdffit.models import mitsuba_principled, mitsuba_roughconductor, mitsuba_roughplastic
 
-MITSUBA_MODELS = ["mitsuba:roughconductor", "mitsuba:roughplastic"]
+MITSUBA_MODELS = ["mitsuba:roughconductor", "mitsuba:roughplastic", "mitsuba:principled"]
 PARAM_SETS, PAIRS = 24, 400
 
 
@@ -74,6 +74,19 @@ def test_broken_copies_are_caught(monkeypatch):
     with monkeypatch.context() as patch:
         patch.setattr(mitsuba_roughplastic, "fresnel_dielectric", lambda c, eta: (_schlick(c), None, None))
         assert np.percentile(relative_errors("mitsuba:roughplastic", seed=1), 99) > 1e-2
+    principled = models.get("mitsuba:principled")
+    unsquared = lambda p, wi, wo: principled.formula({**p, "roughness": np.sqrt(p["roughness"])}, wi, wo)  # noqa: E731
+    assert np.percentile(relative_errors("mitsuba:principled", unsquared, seed=1), 99) > 1e-2
+    with monkeypatch.context() as patch:
+        patch.setattr(mitsuba_principled, "fresnel_dielectric", lambda c, eta: (_schlick(c), None, None))
+        assert np.percentile(relative_errors("mitsuba:principled", seed=1), 99) > 1e-2
+    with monkeypatch.context() as patch:  # Burley's diffuse without its retro-reflection
+        lambertian = lambda cos: 0.0 * cos  # noqa: E731
+        patch.setattr(mitsuba_principled, "schlick_weight", lambertian)
+        assert np.percentile(relative_errors("mitsuba:principled", seed=1), 99) > 1e-2
+    with monkeypatch.context() as patch:  # the clearcoat with a GGX of its alpha instead of GTR1
+        patch.setattr(mitsuba_principled, "gtr1_d", mitsuba_principled.ggx_d)
+        assert np.percentile(relative_errors("mitsuba:principled", seed=1), 99) > 1e-2
 
 
 # -- glTF: the spec's appendix B, written again independently -------------------------------------

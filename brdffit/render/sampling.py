@@ -100,6 +100,11 @@ def _base_lobes(name: str, p, q) -> list[Lobe]:
         a = p("alpha")
         diffuse = [Lobe("cosine", scales=s("diffuse_reflectance"))] if q("diffuse_reflectance") else []
         return diffuse + [Lobe("ggx", (a, a), s("specular_reflectance") if q("specular_reflectance") else ())]
+    if name == "mitsuba:principled":
+        a = max(0.001, p("roughness") ** 2)
+        a_c = 0.1 + (0.001 - 0.1) * p("clearcoat_gloss")  # GTR1's alpha; sampled as a GGX lobe of it
+        return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0),
+                Lobe("cosine", scales=s("sheen"), minus=0), Lobe("ggx", (a_c, a_c), s("clearcoat"), minus=0)]
     if name in ("gltf:metallic_roughness", "blender:principled"):
         a = p("roughness") ** 2  # alpha = roughness^2 in both; the diffuse share is what base_color adds
         return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0)]
