@@ -20,6 +20,8 @@ from brdffit.fitting.result import FitResult
 PLASTIC = {"diffuse_reflectance": [0.3, 0.2, 0.1], "alpha": 0.2, "int_ior": 1.5,
            "specular_reflectance": [1.0, 1.0, 1.0]}
 GLTF = {"base_color": [0.8, 0.4, 0.2], "metallic": 0.3, "roughness": 0.45}
+PRINCIPLED = {"base_color": [0.6, 0.3, 0.2], "roughness": 0.4, "metallic": 0.2, "specular": 0.6, "anisotropic": 0.3,
+              "sheen": 0.4, "clearcoat": 0.5, "clearcoat_gloss": 0.6}
 GGX = {"kd": [0.2, 0.3, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": 0.3, "f0": 0.1}
 
 
@@ -72,14 +74,19 @@ def user_scene_xml(include: str, light, size: int) -> str:
 
 
 @pytest.mark.mitsuba
-def test_native_xml_renders_in_plain_mitsuba_like_brdffit(tmp_path):
+@pytest.mark.parametrize("model, params", [("mitsuba:roughplastic", PLASTIC), ("mitsuba:principled", PRINCIPLED)])
+def test_native_xml_renders_in_plain_mitsuba_like_brdffit(tmp_path, model, params):
     from brdffit.render import render_sphere
 
-    fit = a_fit("mitsuba:roughplastic", PLASTIC)
+    fit = a_fit(model, params)
     fit.export(tmp_path / "paint.xml")
     text = (tmp_path / "paint.xml").read_text()
-    assert '<bsdf type="roughplastic" id="paint">' in text and "brdffit\"" not in text
-    assert '<string name="distribution" value="ggx"/>' in text  # never the plugin's Beckmann default
+    kind = model.split(":")[1]
+    assert f'<bsdf type="{kind}" id="paint">' in text and "brdffit\"" not in text
+    if kind == "roughplastic":
+        assert '<string name="distribution" value="ggx"/>' in text  # never the plugin's Beckmann default
+    else:
+        assert '<float name="spec_trans" value="0.0"/>' in text or '<float name="spec_trans" value="0"/>' in text
     light = np.array([0.4, 0.3, np.sqrt(1 - 0.25)])
     size = 48
     (tmp_path / "scene.xml").write_text(user_scene_xml("paint.xml", light, size))
@@ -206,7 +213,10 @@ def test_cli_export_to_prints_and_stores_the_conversion_error(tmp_path, capsys):
     ("ggx", GGX, ["-o", "x.glb"], "holds a gltf:metallic_roughness material, and this fit is ggx: convert it with --to"),
     ("mitsuba:roughplastic", PLASTIC, ["-o", "x.gltf"], "convert it with --to gltf:metallic_roughness"),
     ("ggx", GGX, ["-o", "x.obj"], "unknown material format '.obj'"),
-    ("ggx", GGX, ["-o", "x.mtlx"], "MaterialX (.mtlx) export is not available"),
+    ("ggx", GGX, ["-o", "x.mtlx"], "holds a gltf:metallic_roughness or blender:principled material, and this "
+                                   "fit is ggx: convert it with --to gltf:metallic_roughness"),
+    ("mitsuba:roughplastic", PLASTIC, ["-o", "x.blend"], "holds a blender:principled material, and this fit is "
+                                                         "mitsuba:roughplastic: convert it with --to blender:principled"),
     ("ggx", GGX, ["--to", "no_such_model", "-o", "x.xml"], "unknown model"),
     ("gltf:metallic_roughness", {**GLTF, "metallic": 1.5}, ["-o", "x.glb"],
      "'metallic' = [1.5] lies outside its bounds of gltf:metallic_roughness [0, 1]"),
@@ -218,6 +228,40 @@ def test_export_refusals(tmp_path, capsys, model, params, args, says):
     err = capsys.readouterr().err.strip()
     assert says in err and "Traceback" not in err and len(err.splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.json"]
+
+
+def test_export_writes_materialx_documents(tmp_path, capsys):
+    """``.mtlx`` through the same export path: a glTF fit as gltf_pbr as it is; a ggx fit converted
+    to gltf:metallic_roughness, its conversion error in the document's brdffit attribute."""
+    import MaterialX as mx
+
+    src = write_fit(tmp_path, "gltf:metallic_roughness", GLTF)
+    assert main(["export", src, "-o", str(tmp_path / "m.mtlx")]) == 0
+    doc = mx.createDocument()
+    mx.readFromXmlFile(doc, str(tmp_path / "m.mtlx"))
+    (shader,) = doc.getNodes("gltf_pbr")
+    assert shader.getInput("metallic").getValue() == pytest.approx(0.3)
+    assert shader.getInput("roughness").getValue() == pytest.approx(0.45)
+    assert list(shader.getInput("base_color").getValue().asTuple()) == pytest.approx([0.8, 0.4, 0.2])
+    other = tmp_path / "ggx"
+    other.mkdir()
+    assert main(["export", write_fit(other, "ggx", GGX), "--to", "gltf:metallic_roughness",
+                 "-o", str(other / "g.mtlx")]) == 0
+    assert "converted ggx -> gltf:metallic_roughness" in capsys.readouterr().err
+    assert '"converted_from"' in (other / "g.mtlx").read_text().replace("&quot;", '"')
+
+
+def test_export_writes_a_blend_file(blender, tmp_path):
+    """``.blend`` through the same export path (Blender writes it in the worker): the material, as
+    Blender reads it back, carries the fitted inputs."""
+    params = {"base_color": [0.7, 0.3, 0.1], "metallic": 0.2, "roughness": 0.35, "ior": 1.5, "specular_tint": 1.0}
+    fit = a_fit("blender:principled", params)
+    fit.export(tmp_path / "paint.blend")
+    (name, mat), = blender.inspect(tmp_path / "paint.blend").items()
+    assert name == "paint"
+    for key, value in fit.model.native(fit.params)["inputs"].items():
+        if key in mat["inputs"]:
+            assert np.allclose(mat["inputs"][key], value, atol=1e-6), key
 
 
 def test_python_export_refusals(tmp_path):

@@ -77,7 +77,7 @@ def test_validate_with_cycles(blender, tmp_path):
     assert saved["renderer"] == "cycles" and saved["fit"] == "blender:principled"
     assert len(list(out.glob("panel_*.png"))) == 2 and len(list(out.glob("fit_*.exr"))) == 2
     # the reference is the model's own table rendered by Mitsuba: the two renderers differ by little
-    assert v.metrics["overall"]["relative_rmse"] < 0.1
+    assert v.metrics["overall"]["rel_rmse"] < 0.1
 
 
 def fit_file(path, model, params):

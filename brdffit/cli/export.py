@@ -14,7 +14,8 @@ from . import cli
 @click.argument("fit_json", metavar="FIT.json", type=click.Path(path_type=str))
 @click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None,
               help="Material file to write; its extension picks the format: .xml (Mitsuba 3), .glb or .gltf "
-                   "(glTF 2.0) [default: Mitsuba XML on standard output].")
+                   "(glTF 2.0), .blend (Blender; needs .venv-blender), .mtlx (MaterialX 1.39) "
+                   "[default: Mitsuba XML on standard output].")
 @click.option("--to", "to", default=None, metavar="MODEL",
               help="Convert the fit to this native model first (e.g. mitsuba:roughplastic, gltf:metallic_roughness): "
                    "fitted to the fit's BRDF on the UBO-81 grid; the conversion error is printed and stored in the file.")

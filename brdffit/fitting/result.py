@@ -152,7 +152,7 @@ class FitResult:
     def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
                force: bool = False) -> "FitResult":
         """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
-        ``.glb``/``.gltf`` glTF 2.0 (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
+        ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
         fit is converted first; returns the fit written."""
         return provider("fit_export")(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id,
                                       force=force)

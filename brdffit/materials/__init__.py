@@ -4,7 +4,10 @@
   BRDF on the UBO-81 grid and records the conversion error.
 - :func:`export` writes a fit as a file whose extension picks the format: ``.xml`` a Mitsuba 3
   scene-XML fragment (the renderer's own plugin for a ``mitsuba:*`` fit, the ``brdffit`` plugin of
-  SPEC 8 otherwise), ``.glb`` / ``.gltf`` a UV sphere carrying a ``gltf:*`` material.
+  SPEC 8 otherwise), ``.glb`` / ``.gltf`` a UV sphere carrying a ``gltf:*`` material, ``.blend`` a
+  sphere with a ``blender:principled`` material (written by Blender in the worker of
+  :mod:`brdffit.cycles`; needs ``.venv-blender``), ``.mtlx`` a MaterialX 1.39 document (``gltf_pbr``
+  for a glTF fit, ``open_pbr_surface`` for a Blender fit).
 
 ``FitResult.convert`` / ``FitResult.export`` and ``brdffit export FIT.json [--to MODEL] -o FILE`` are
 thin surfaces over these two functions.
@@ -22,11 +25,12 @@ import numpy as np
 from ..errors import UsageError
 
 #: File extension -> what it holds.
-FORMATS = {".xml": "Mitsuba 3 scene XML", ".glb": "glTF 2.0 binary", ".gltf": "glTF 2.0"}
-#: Extensions of the formats SPEC 13 names that this version cannot write yet.
-PLANNED = {".blend": "Blender (.blend)", ".mtlx": "MaterialX (.mtlx)"}
-#: The one native model each format that needs one holds.
-FORMAT_MODEL = {".glb": "gltf:metallic_roughness", ".gltf": "gltf:metallic_roughness"}
+FORMATS = {".xml": "Mitsuba 3 scene XML", ".glb": "glTF 2.0 binary", ".gltf": "glTF 2.0",
+           ".blend": "Blender", ".mtlx": "MaterialX 1.39"}
+#: The native models a format that needs one holds (the first is the one to convert to).
+FORMAT_MODELS = {".glb": ("gltf:metallic_roughness",), ".gltf": ("gltf:metallic_roughness",),
+                 ".blend": ("blender:principled",),
+                 ".mtlx": ("gltf:metallic_roughness", "blender:principled")}
 
 
 def convert(fit, model, *, loss: str | None = None, **fit_options):
@@ -90,17 +94,15 @@ def check_format(fit, path: str | os.PathLike, to: str | None = None, source=Non
     ``UsageError`` line that says what would work. Called before any work. ``source`` (the fit
     file, if any) is the file an error about the fit's parameters names."""
     ext = Path(path).suffix.lower()
-    if ext in PLANNED:
-        raise UsageError(f"{path}: {PLANNED[ext]} export is not available in this version of brdffit; "
-                         "write .xml (Mitsuba 3) or .glb/.gltf (glTF 2.0)")
     if ext not in FORMATS:
         raise UsageError(f"{path}: unknown material format {ext or '(no extension)'!r}; "
                          f"use one of {', '.join(sorted(FORMATS))}")
-    needed = FORMAT_MODEL.get(ext)
+    needed = FORMAT_MODELS.get(ext)
     name = to if to is not None else fit.model.name
-    if needed is not None and "".join(str(name).split()).lower() != needed:
-        raise UsageError(f"{path}: a {FORMATS[ext]} file holds a {needed} material, and this fit is "
-                         f"{name}: convert it with --to {needed} (FitResult.export(path, to={needed!r}))")
+    if needed is not None and "".join(str(name).split()).lower() not in needed:
+        held = " or ".join(needed)
+        raise UsageError(f"{path}: a {FORMATS[ext]} file holds a {held} material, and this fit is "
+                         f"{name}: convert it with --to {needed[0]} (FitResult.export(path, to={needed[0]!r}))")
     if to is None and fit.model.is_native:
         native_of(fit, source)  # parameters outside what the renderer accepts: refused before any work
     return ext
@@ -134,12 +136,20 @@ def material_bytes(fit, ext: str, bsdf_id: str) -> bytes:
         if line:
             text = text.replace("<scene", f"<!-- {line.replace('--', '- -')} -->\n<scene", 1)
         return text.encode()
-    from .gltf import gltf_bytes
-
     extras = {"brdffit": {"model": fit.model.name, "data_name": fit.data_name, "loss": fit.loss,
                           "converged": bool(fit.converged), "metrics": dict(fit.metrics),
                           **({"converted_from": fit.options["converted_from"]}
                              if isinstance(fit.options, dict) and "converted_from" in fit.options else {})}}
+    if ext == ".blend":
+        from .blender import blend_bytes
+
+        return blend_bytes(native_of(fit), bsdf_id, extras)
+    if ext == ".mtlx":
+        from .materialx import mtlx_text
+
+        return mtlx_text(fit.model.name, native_of(fit), bsdf_id, extras).encode()
+    from .gltf import gltf_bytes
+
     return gltf_bytes(native_of(fit), bsdf_id, binary=ext == ".glb", extras=extras)
 
 
