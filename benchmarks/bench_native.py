@@ -17,7 +17,8 @@ from pathlib import Path
 
 import brdffit
 
-MODELS = ["ggx", "lambert+ggx+ggx", "mitsuba:roughconductor", "mitsuba:roughplastic", "gltf:metallic_roughness"]
+MODELS = ["ggx", "lambert+ggx+ggx", "mitsuba:roughconductor", "mitsuba:roughplastic", "mitsuba:principled",
+          "gltf:metallic_roughness", "blender:principled"]
 
 
 def main() -> None:

@@ -5,6 +5,7 @@ tracer at depth 8, 256 x 256) in a fresh process, so that peak memory (ru_maxrss
 
   native roughconductor   Mitsuba's own plugin (what a mitsuba:roughconductor fit exports as)
   native roughplastic     Mitsuba's own plugin (a mitsuba:roughplastic fit)
+  native principled       Mitsuba's own plugin (a mitsuba:principled fit: clearcoat and sheen on)
   brdffit plugin          a ggx fit as <bsdf type="brdffit">: the JAX formula run by Dr.Jit, symbolic
   brdffit callback        the same fit through the JAX callback inside evaluated_calls() (the path
                           the plugin used before; still what measured tables and parameter maps use)
@@ -37,6 +38,11 @@ if case == "native roughconductor":
 elif case == "native roughplastic":
     bsdf = {"type": "roughplastic", "distribution": "ggx", "alpha": 0.2, "int_ior": 1.5, "ext_ior": 1.0,
             "diffuse_reflectance": {"type": "rgb", "value": [0.2, 0.15, 0.1]}}
+elif case == "native principled":
+    from brdffit.models import get
+    bsdf = get("mitsuba:principled").native({"base_color": [0.2, 0.15, 0.1], "roughness": 0.45, "metallic": 0.0,
+                                             "specular": 0.5, "anisotropic": 0.0, "sheen": 0.3, "clearcoat": 0.5,
+                                             "clearcoat_gloss": 0.5})
 elif case == "measured (RGL)":
     bsdf = {"type": "measured", "filename": rgl}
 else:
@@ -77,7 +83,7 @@ def main() -> None:
     args = ap.parse_args()
     data = Path(os.environ.get("BRDFFIT_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
     rgl = data / "measured" / "rgl" / "vch_golden_yellow_rgb.bsdf"
-    cases = ["native roughconductor", "native roughplastic", "brdffit plugin", "brdffit callback"]
+    cases = ["native roughconductor", "native roughplastic", "native principled", "brdffit plugin", "brdffit callback"]
     if rgl.is_file():
         cases.append("measured (RGL)")
     else:

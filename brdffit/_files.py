@@ -39,6 +39,13 @@ _HELD_GUARD = threading.Lock()
 #: interpreter happens to be (seen: inside JAX's ``_xla_gc_callback``; the fit then went on and
 #: wrote its result). So nothing is committed once this is set, whatever became of the exception.
 STOP_REQUESTED = threading.Event()
+#: What this process writes, for the ``brdffit`` executable's Ctrl-C (:func:`remove_this_runs_outputs`):
+#: the targets it holds a lock on (absolute path -> lock file) and the results it has committed.
+#: ``_GUARD`` is held while either changes and for a whole commit, so that an interrupt handled in
+#: another thread sees a result either not yet committed or committed and listed, never half-way.
+_GUARD = threading.RLock()
+_RESERVED: dict[str, Path] = {}
+_COMMITTED: list[Path] = []
 
 
 def _hidden(path: Path, what: str) -> str:
@@ -100,6 +107,12 @@ def _remove(path: Path) -> None:
 
 def _commit(tmp: Path, path: Path, force: bool) -> None:
     """Move the finished ``tmp`` onto ``path``; the target is never missing or partial."""
+    with _GUARD:
+        _commit_guarded(tmp, path, force)
+        _COMMITTED.append(path.absolute())
+
+
+def _commit_guarded(tmp: Path, path: Path, force: bool) -> None:
     if STOP_REQUESTED.is_set():
         raise KeyboardInterrupt  # the stop request's own exception was swallowed on the way
     if not (path.is_symlink() or path.exists()):
@@ -168,13 +181,15 @@ def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = 
             raise UsageError(f"{path}: another brdffit run is writing it now")
         _clean_leftovers(path)
         check_target(path, force, folder)  # again, now that no other run can change it
-        with _HELD_GUARD:
+        with _HELD_GUARD, _GUARD:
             _HELD[key] = 1
+            _RESERVED[key] = lock
         try:
             yield path
         finally:
-            with _HELD_GUARD:
+            with _HELD_GUARD, _GUARD:
                 _HELD.pop(key, None)
+                _RESERVED.pop(key, None)
     finally:
         _release(fd, lock)
 
@@ -231,3 +246,26 @@ def atomic_dir(path: str | os.PathLike, force: bool = False):
             _commit(tmp, path, force)
         finally:
             _remove(tmp)
+
+
+def forget_committed() -> None:
+    """Start a new command: what was committed before is not this command's to remove."""
+    with _GUARD:
+        _COMMITTED.clear()
+
+
+def remove_this_runs_outputs(timeout: float = 10.0) -> None:
+    """For an interrupt that ends the process at once (the ``brdffit`` executable's Ctrl-C, handled in
+    a thread while the work may be anywhere, even inside a compiler): remove every result this
+    command committed, every temporary entry beside a target it holds, and their lock files. Waits
+    up to ``timeout`` s for a commit in progress; the caller then ends the process (``os._exit``),
+    so ``_GUARD`` stays held and nothing is committed after this."""
+    _GUARD.acquire(timeout=timeout)
+    for path in _COMMITTED:
+        _remove(path)
+    for key, lock in list(_RESERVED.items()):
+        path = Path(key)
+        for entry in path.parent.glob(f"{_hidden(path, 'new-')}*"):
+            _remove(entry)
+        with contextlib.suppress(OSError):
+            lock.unlink()

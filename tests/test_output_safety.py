@@ -186,6 +186,46 @@ def test_ctrl_c_exits_130_with_nothing_written(tmp_path):
     assert list(tmp_path.iterdir()) == []  # no result, no temporary folder, no lock file
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("moment", [0.3, 0.7, 1.5, 3.0])
+def test_ctrl_c_at_a_fixed_moment_ends_at_once_with_nothing_written(tmp_path, moment):
+    """Issue 28: SIGINT at fixed moments of a ``brdffit fit`` (the full sweep is
+    benchmarks/bench_interrupt.py). Before brdffit's handler is installed the signal ends the process
+    itself (-2); after, brdffit ends it (130); never an abort, a crash or a hang (the old handler
+    raised into whatever ran: -11 at 0.3 s in the sweep), and nothing is left in the folder."""
+    out = tmp_path / "fit"
+    p = subprocess.Popen([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert+ggx+ggx", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**ENV, "BRDFFIT_CACHE": "off"},
+                         preexec_fn=_deliverable_sigint)
+    time.sleep(moment)
+    assert p.poll() is None, "the fit ended before the signal: the moment is too late for this test"
+    p.send_signal(signal.SIGINT)
+    sent = time.monotonic()
+    code = p.wait(timeout=60)
+    assert time.monotonic() - sent < 5.0
+    err = p.stderr.read()
+    assert code in (130, -signal.SIGINT), err
+    if code == 130:
+        assert err.strip().endswith("brdffit: interrupted") and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path):
+    """The executable's Ctrl-C handler removes what this command wrote, a committed result too (the
+    old handler reported 130 with the result written when the signal came after the commit)."""
+    from brdffit import _files
+
+    _files.forget_committed()
+    with atomic_dir(tmp_path / "done") as tmp:
+        (tmp / "fit.json").write_text("{}")
+    with reserve(tmp_path / "pending", folder=True):
+        (tmp_path / ".pending.brdffit-new-x").mkdir()  # a temporary result being built
+        _files.remove_this_runs_outputs(timeout=1.0)
+        assert list(tmp_path.iterdir()) == []
+    _files._GUARD.release()  # the watcher would end the process here, holding it
+    _files.forget_committed()
+
+
 def test_keyboard_interrupt_in_process_is_130(tmp_path, monkeypatch, capsys):
     """In-process: an interrupt during the work unwinds the temporary result."""
     import brdffit.cli.convert as convert_module

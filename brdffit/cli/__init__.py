@@ -12,6 +12,7 @@ Each sub-command lives in its own module of this package and registers itself on
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -51,12 +52,49 @@ class Interrupted(BaseException):
     removed, locks released)."""
 
 
+#: Set by :func:`entry` (the ``brdffit`` executable): Ctrl-C ends the process from a watcher thread
+#: (:func:`_end_on_interrupt`) instead of raising into the running code.
+_ENDS_PROCESS = False
+
+
+def _end_on_interrupt() -> None:
+    """Make Ctrl-C end the ``brdffit`` process at once, whatever it is doing, leaving nothing written.
+
+    An exception raised by a signal handler lands wherever the interpreter is: inside a compiler's
+    callback or an extension module's initialisation it aborted the process (-6), crashed it (-11)
+    or hung it, and after a commit it reported 130 with the result written (issue 28, measured by
+    benchmarks/bench_interrupt.py). So the handler raises nothing: the C-level signal handler writes
+    the signal's number to a pipe (``signal.set_wakeup_fd``), a daemon thread waiting on it wakes
+    within milliseconds even while the main thread runs native code, removes what this command
+    wrote (temporaries, locks, committed results: ``_files.remove_this_runs_outputs``, which waits
+    for a commit in progress), says so in one line and ends the process with 130 (``os._exit``:
+    no teardown of native libraries in the middle of their work)."""
+    global _ENDS_PROCESS
+    from .._files import STOP_REQUESTED, remove_this_runs_outputs
+
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+
+    def watch() -> None:
+        while signal.SIGINT not in os.read(read_end, 64):
+            pass
+        STOP_REQUESTED.set()
+        remove_this_runs_outputs()
+        os.write(2, b"brdffit: interrupted\n")
+        os._exit(EXIT_INTERRUPTED)
+
+    threading.Thread(target=watch, name="brdffit-interrupt", daemon=True).start()
+    signal.signal(signal.SIGINT, lambda signum, frame: None)  # the watcher acts; a C handler is needed
+    signal.set_wakeup_fd(write_end, warn_on_full_buffer=False)
+    _ENDS_PROCESS = True
+
+
 @contextlib.contextmanager
 def _interrupts_raise():
     """Ctrl-C raises :class:`Interrupted` and sets ``STOP_REQUESTED``, which stops any result from
     being committed even where the exception is swallowed (a signal landing in a garbage-collection
     callback or a ``__del__``); ``main`` then reports the run as interrupted."""
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or _ENDS_PROCESS:
         yield
         return
     from .._files import STOP_REQUESTED
@@ -127,6 +165,9 @@ def _show_warnings(caught, debug: bool) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map errors to SPEC 10 exit statuses."""
     argv, debug = _split_debug(list(sys.argv[1:] if argv is None else argv))
+    from .._files import forget_committed
+
+    forget_committed()
     caught: list = []
     try:
         with warnings.catch_warnings(record=True) as caught, _interrupts_raise():
@@ -170,13 +211,15 @@ def entry() -> None:
     full ones rarely; and the objects are frozen before the interpreter exits, so that its
     teardown does not walk all of them again. Measured on a second-process ``brdffit fit``: the
     default settings cost ~0.8 s CPU of ~3.3 s, most of it in that teardown (atexit handlers
-    and module teardown still run; the exit is not skipped).
+    and module teardown still run; the exit is not skipped). Ctrl-C ends the process from a watcher
+    thread (:func:`_end_on_interrupt`).
     (It used to skip the teardown with ``os._exit`` to save ~0.4 s; that also hid the abort at exit
     of issue 13 -- a daemon compile thread -- which is fixed in the library now, and skipped
     atexit handlers such as coverage's.)
     """
     import gc
 
+    _end_on_interrupt()
     gc.set_threshold(*GC_THRESHOLDS)
     try:
         status = main()
