@@ -106,3 +106,53 @@ def test_a_scene_beyond_the_data_is_reported():
     half = type(half)(np.vstack([half.wi, grazing.wi[:10]]), np.vstack([half.wo, grazing.wo[:10]]), np.ones(20),
                       np.ones(20, bool), "s", "p", (8, 8), 1, 2, 0.0)
     assert half.coverage(m) == pytest.approx(0.5)
+
+
+# -- a table in another unit (issue 28) -----------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def sample():
+    import brdffit.sample
+
+    return brdffit.sample.generate()
+
+
+@pytest.mark.parametrize("solver", ["lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy"])
+def test_a_fit_does_not_depend_on_the_unit_of_the_data(sample, solver):
+    """The bundled sample scaled by 1e-12 and by 1e12 (a radiometric unit change) fits as the original,
+    with every solver: the same status, rel_rmse, and parameters (the scales times the factor). Before,
+    the default lm stopped "converged" at rel_rmse 0.95 at x1e12 (0.16 unscaled) and scipy at 2213 at
+    x1e-12: the log loss has a unit (ln(1 + f cos)), and the solvers saw numbers far from one."""
+    fits = {}
+    for s in (1.0, 1e-12, 1e12):
+        m = brdffit.Measurement(sample.wi, sample.wo, np.asarray(sample.values) * s, grid="ubo81", name=f"x{s:g}")
+        fits[s] = brdffit.fit(m, "ggx", solver=solver)
+    base = fits[1.0]
+    for s in (1e-12, 1e12):
+        r = fits[s]
+        assert r.status == base.status, (s, r.status, base.status)
+        assert r.metrics["rel_rmse"] == pytest.approx(base.metrics["rel_rmse"], rel=1e-6), s
+        assert r.options.get("data_unit") == pytest.approx(s, rel=1e-12)
+        for name in ("kd", "ks"):
+            np.testing.assert_allclose(np.asarray(r.params[name]) / s, base.params[name], rtol=1e-5, atol=1e-9)
+        for name in ("alpha", "f0"):
+            np.testing.assert_allclose(r.params[name], base.params[name], rtol=1e-5, atol=1e-9)
+
+
+def test_a_table_in_reflectance_s_range_is_fitted_as_it_is():
+    """The unit is changed only far from reflectance's range (1e-3..1e2 mean f cos): SPEC 5's log loss
+    as defined for every real table, and for models whose f is not proportional to their linear
+    parameters (a native model's fixed Fresnel term) never."""
+    from brdffit.fitting.problem import data_unit, homogeneous, prepare
+
+    m = ggx_measurement()
+    assert data_unit(brdffit.models.get("ggx"), prepare(m)) == 1.0
+    scaled = brdffit.Measurement(m.wi, m.wo, np.asarray(m.values) * 1e9, grid="ubo81")
+    unit = data_unit(brdffit.models.get("ggx"), prepare(scaled))
+    assert np.log10(unit) == round(np.log10(unit))  # a power of ten: the scaled values stay exact
+    mean = np.mean(np.abs(np.asarray(scaled.values) * np.asarray(scaled.wi)[:, 2:3]))
+    assert 0.1 / np.sqrt(10) <= mean / unit <= 0.1 * np.sqrt(10)
+    assert homogeneous(brdffit.models.get("lambert+ggx+ggx")) and homogeneous(brdffit.models.get("lafortune"))
+    assert not homogeneous(brdffit.models.get("mitsuba:principled"))  # its dielectric lobe has no scale
+    assert not homogeneous(brdffit.models.get("mitsuba:roughconductor"))  # no linear parameter
+    assert data_unit(brdffit.models.get("mitsuba:principled"), prepare(scaled)) == 1.0

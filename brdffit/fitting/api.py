@@ -15,7 +15,7 @@ from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
 from .losses import check_loss
-from .problem import loss_values, prepare, resolve_model
+from .problem import data_unit, in_unit, loss_values, prepare, resolve_model
 from .result import FitResult
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
 from .program import STATUS_TEXT, check_solver, compiled, program_args, run_fit
@@ -188,10 +188,15 @@ def fit(
         raise UsageError("multistart must be >= 0")
     prep = prepare(measurement, weights)
     m = resolve_model(model, prep.channels)
-    data = prep.data
     space = parameter_space(m, bounds, fixed, physical)
-    lo, hi, free = space.lo, space.hi, space.free
-    anchor = space.clip(_start_from("defaults" if init is None else init, m, lo, hi))
+    # The solve works in the table's unit (problem.data_unit: 1, or a power of ten for a table far from
+    # reflectance's range); the result is given back in the table's own unit.
+    unit = data_unit(m, prep)
+    unscale = np.where(space.linear_mask(), unit, 1.0)
+    solve_space = space.in_unit(unit)
+    data = in_unit(prep, unit).data if unit != 1.0 else prep.data
+    lo, hi, free = solve_space.lo, solve_space.hi, solve_space.free
+    anchor = solve_space.clip(_start_from("defaults" if init is None else init, m, space.lo, space.hi) / unscale)
     n_starts = 1 + (default_starts(m) - 1 if multistart is None else int(multistart))
     if solver == "scipy":
         n_starts = 1 if multistart is None else n_starts
@@ -221,12 +226,15 @@ def fit(
     else:
         # One compiled program: grid start (unless init is given), solve, metrics, J^T J.
         grid = init is None
-        args = program_args(m, space, data, anchor[None, :] if not grid else np.zeros((0, m.n_free)), grid=grid)
+        args = program_args(m, solve_space, data, anchor[None, :] if not grid else np.zeros((0, m.n_free)), grid=grid)
         n_given = min(n_starts, len(args[0]) if grid else 1)
         out, compile_s, run_s = run_fit(m, loss, solver, rtol, atol, max_steps, n_given, args, grid=grid, note=note)
         v, value, code, steps, v0 = out["v"], float(out["loss"]), int(out["code"]), int(out["steps"]), out["start"]
         metrics, jtj = {k: float(x) for k, x in out["metrics"].items()}, out["jtj"]
     note(f"solved: {steps} steps, loss {value:.6g}, {STATUS_TEXT[code]}")
+    if unit != 1.0:  # back to the table's unit; metrics and J^T J are computed there afresh
+        v, v0 = np.asarray(v) * unscale, np.asarray(v0) * unscale
+        metrics = jtj = value = None  # the loss too: SPEC 5's value on the table as given
     # Fixed entries exactly at their values; lobes of one kind narrowest first (J^T J follows).
     perm = space.canonical_order(space.clip(v))
     v = space.clip(v)[perm]
@@ -237,6 +245,7 @@ def fit(
                    options={"max_steps": max_steps, "rtol": rtol, "atol": atol,
                             "multistart": None if multistart is None else int(multistart),
                             "starts": int(n_given), "init": "grid" if init is None else "given",
+                            **({"data_unit": unit} if unit != 1.0 else {}),
                             **space_options(bounds, fixed, physical)})
     if scene_note is not None:
         result = dataclasses.replace(result, warnings=(*result.warnings, scene_note))
@@ -272,6 +281,8 @@ def _result(space: ParameterSpace, loss, solver, measurement: Measurement, prep,
         jtj_fn, _ = compiled(("jtj", m, loss), lambda: gauss_newton_matrix(m, loss), *args)
         metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
         jtj = np.asarray(jtj_fn(*args))
+    if value is None:
+        value = metrics[loss]
     stderr = standard_errors(m, params, jtj, value, prep.n_used * prep.channels, lo, hi, free)
     ref = np.asarray(prep.data[2])[prep.used]  # the data's unit (see ParameterSpace.at_bound)
     at_bound = space.at_bound(v, data_scale=float(np.mean(np.abs(ref))) if ref.size else None)

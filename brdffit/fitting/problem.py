@@ -223,3 +223,48 @@ def values_metrics(f, data: Data, losses=L.LOSSES) -> dict:
 def evaluate(model: Model, params, data: Data) -> dict[str, float]:
     v = model.flatten(params)
     return {k: float(x) for k, x in loss_values_fn(model)(v, data).items()}
+
+
+# -- the data's unit ---------------------------------------------------------------------------------
+#: A table whose mean |f_r cos theta_i| (over the used samples) lies in this range is fitted in its own
+#: unit (1/sr, the range of real reflectance); outside it (a radiometric unit change: x1e-12, x1e12)
+#: it is fitted in units of a power of ten that brings that mean near CANONICAL_MEAN, and the linear
+#: parameters are scaled back. The ``log`` loss has a unit of its own (ln(1 + f cos) is ~ f cos below 1
+#: and ~ ln(f cos) above), so without this a scaled table was another problem for it; and the solvers'
+#: steps, starts and stopping tests all see numbers of order one (issue 28: 8 of 24 fits of a table
+#: scaled by 1e-12 or 1e12 reported "converged" 1.7x-300x worse than the original's fit).
+UNIT_RANGE = (1e-3, 1e2)
+CANONICAL_MEAN = 0.1
+
+
+@functools.lru_cache(maxsize=None)
+def homogeneous(model: Model) -> bool:
+    """Whether f_r is proportional to the model's linear parameters together (f = 0 when they are 0),
+    so that a table scaled by s is fitted by the same model with them scaled by s."""
+    if not any(p.linear for p in model.params):
+        return False
+    zero = {p.name: (np.zeros(model.size(p)) if p.linear else np.asarray(v, np.float64))
+            for p, v in zip(model.params, model.unflatten(model.default_vector()).values())}
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(2, 64, 3))
+    d[..., 2] = np.abs(d[..., 2]) + 0.1
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return bool(np.all(np.asarray(model.eval(zero, d[0], d[1])) == 0.0))
+
+
+def data_unit(model: Model, prep: Prepared) -> float:
+    """1.0, or the power of ten in whose units the fit of ``model`` to ``prep`` works (see UNIT_RANGE)."""
+    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
+    used = np.asarray(prep.used)
+    if not used.any():
+        return 1.0
+    mean = float(np.mean(np.abs(np.asarray(ref)[used] * np.asarray(cos_i)[used])))
+    if not (np.isfinite(mean) and mean > 0) or UNIT_RANGE[0] <= mean <= UNIT_RANGE[1] or not homogeneous(model):
+        return 1.0
+    return float(10.0 ** round(np.log10(mean / CANONICAL_MEAN)))
+
+
+def in_unit(prep: Prepared, unit: float) -> Prepared:
+    """``prep`` with its values (and the loss floors that follow them) divided by ``unit``."""
+    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
+    return dataclasses.replace(prep, data=Data(wi, wo, np.asarray(ref) / unit, sqrt_w, cos_i, np.asarray(floor) / unit))

@@ -153,6 +153,18 @@ class ParameterSpace:
     def n_free(self) -> int:
         return int(self.free.sum())
 
+    def linear_mask(self) -> np.ndarray:
+        """Flat entries of the linear parameters (those a table's unit scales)."""
+        return np.concatenate([np.full(self.model.size(p), p.linear) for p in self.model.params])
+
+    def in_unit(self, unit: float) -> "ParameterSpace":
+        """This space for the table divided by ``unit`` (``problem.data_unit``): the linear parameters'
+        bounds and fixed values divided by it, the rest unchanged."""
+        if unit == 1.0:
+            return self
+        scale = np.where(self.linear_mask(), 1.0 / unit, 1.0)
+        return dataclasses.replace(self, lo=self.lo * scale, hi=self.hi * scale, values=self.values * scale)
+
     def clip(self, v) -> np.ndarray:
         """A flat vector moved into the box, fixed entries at their values."""
         v = np.clip(np.asarray(v, dtype=np.float64), self.lo, self.hi)

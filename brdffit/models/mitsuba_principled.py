@@ -6,18 +6,18 @@ W. Jakob et al., Mitsuba 3 renderer, ``src/bsdfs/principled.cpp`` and ``principl
 
 Parameters
 ----------
-===============  ========  ==============  =======  ==========  ==================================================
-name             channels  bounds          default  role        meaning
-===============  ========  ==============  =======  ==========  ==================================================
-base_color       3         [0, 1] linear   0.5      albedo      diffuse albedo and the metal's F0
-roughness        1         [0.032, 1]      0.5      roughness   GGX alpha = roughness^2 (isotropic)
-metallic         1         [0, 1]          0.1      fresnel     dielectric (0) to conductor (1)
-specular         1         [1e-3, 1]       0.5      fresnel     dielectric F0 / 0.08: eta = 2 / (1 - sqrt(0.08 s)) - 1
-anisotropic      1         [0, 0.9]        0.1      anisotropy  alpha_x,y = roughness^2 / a, roughness^2 a, a = sqrt(1 - 0.9 x)
-sheen            1         [0, 1] linear   0.1      albedo      the grazing sheen lobe's weight
-clearcoat        1         [0, 1] linear   0.1      albedo      the secondary (GTR1) lobe's weight
-clearcoat_gloss  1         [0, 1]          0.5      roughness   GTR1 alpha = lerp(0.1, 0.001, gloss)
-===============  ========  ==============  =======  ==========  ==================================================
+===============  ========  ===============  ==========  =======  ==========  ===============================================================
+name             channels  bounds           physical    default  role        meaning
+===============  ========  ===============  ==========  =======  ==========  ===============================================================
+base_color       3         [0, 1]           [0, 1]      0.5      albedo      diffuse albedo and the metal's F0
+roughness        1         [0.032, 1]       [0.032, 1]  0.5      roughness   GGX alpha = roughness^2 (floor 0.001)
+metallic         1         [0, 1]           [0, 1]      0.1      fresnel     dielectric (0) to conductor (1)
+specular         1         [1e-3, 1] (log)  [1e-3, 1]   0.5      fresnel     dielectric F0 / 0.08: eta = 2 / (1 - sqrt(0.08 s)) - 1
+anisotropic      1         [0, 0.9]         [0, 0.9]    0.1      anisotropy  alpha_x,y = roughness^2 / a, roughness^2 a; a = sqrt(1 - 0.9 x)
+sheen            1         [0, 1]           [0, 1]      0.1      albedo      the grazing sheen lobe's weight
+clearcoat        1         [0, 1]           [0, 1]      0.1      albedo      the secondary (GTR1) lobe's weight
+clearcoat_gloss  1         [0, 1]           [0, 1]      0.5      roughness   GTR1 alpha = lerp(0.1, 0.001, gloss)
+===============  ========  ===============  ==========  =======  ==========  ===============================================================
 
 f_r = F_p D G / (4 (n.l)(n.v))                               main GGX lobe
     + (1 - metallic) base_color / pi (f_diff + f_retro)        Burley's diffuse and retro-reflection
