@@ -231,6 +231,18 @@ def fit(
         out, compile_s, run_s = run_fit(m, loss, solver, rtol, atol, max_steps, n_given, args, grid=grid, note=note)
         v, value, code, steps, v0 = out["v"], float(out["loss"]), int(out["code"]), int(out["steps"]), out["start"]
         metrics, jtj = {k: float(x) for k, x in out["metrics"].items()}, out["jtj"]
+        for lobe in _init.switched_off_lobes(solve_space, np.asarray(v)):
+            # A lobe the solve switched off: try it again at every roughness (linear parameters solved
+            # at each, the fit itself one more candidate), and keep what lowers the loss.
+            note(f"re-seeding {lobe}: the fit switched it off")
+            pts = _init.reseed_points(solve_space, np.asarray(v), lobe)
+            again = (pts, np.asarray(v, np.float64)[None, :]) + args[2:]
+            out2, c_s, r_s = run_fit(m, loss, solver, rtol, atol, max_steps, 1, again, grid=True, note=note)
+            compile_s, run_s = compile_s + c_s, run_s + r_s
+            if float(out2["loss"]) < value:
+                v, value, code, v0 = out2["v"], float(out2["loss"]), int(out2["code"]), out2["start"]
+                steps += int(out2["steps"])
+                metrics, jtj = {k: float(x) for k, x in out2["metrics"].items()}, out2["jtj"]
     note(f"solved: {steps} steps, loss {value:.6g}, {STATUS_TEXT[code]}")
     if unit != 1.0:  # back to the table's unit; metrics and J^T J are computed there afresh
         v, v0 = np.asarray(v) * unscale, np.asarray(v0) * unscale
