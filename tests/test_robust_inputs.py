@@ -184,8 +184,22 @@ def test_switched_off_lobes_are_found_and_reseeded():
     p = {"kd": [0.0, 0.0, 0.0], "ggx1.ks": [0.0, 0.0, 0.0], "ggx1.alpha": 0.1, "ggx1.f0": 0.04,
          "ggx2.ks": [0.5, 0.0, 0.0], "ggx2.alpha": 0.3, "ggx2.f0": 0.1}
     v = np.asarray(space.model.flatten(space.model.check_params(p)))
-    assert init.switched_off_lobes(space, v) == ["ggx1"]
-    pts = init.reseed_points(space, v, "ggx1")  # columns: ggx1.alpha, ggx1.f0, ggx2.alpha, ggx2.f0
+    assert init.switched_off_lobes(space, v) == [("ggx1.ks", "ggx1.alpha", "ggx1.f0")]
+    pts = init.reseed_points(space, v, ("ggx1.ks", "ggx1.alpha", "ggx1.f0"))  # columns: ggx1.alpha, ggx1.f0, ggx2.alpha, ggx2.f0
     assert pts.shape == (init.POINTS_ROUGHNESS * init.POINTS_OTHER, 4)
     assert len(set(pts[:, 0])) == init.POINTS_ROUGHNESS and len(set(pts[:, 1])) == init.POINTS_OTHER
     assert np.all(pts[:, 2] == 0.3) and np.all(pts[:, 3] == 0.1)
+
+
+@pytest.mark.parametrize("solver", ["lm", "dogleg"])
+def test_a_noise_free_lafortune_mirror_lobe_is_reached(solver):
+    """Issue 28's adversarial case: kd 0.2, rho 1, cx -1, cz 1, n 50 on the UBO-81 pairs. The default
+    start used to sit at (cx, cz) = (-1.84, 1.92), n 160, where |C|^n reaches the formula's cap: lm
+    stopped there "converged" at rel_rmse 0.087, dogleg at 0.46. The grid now tries lobe directions
+    of |C| about 1 (lafortune.C_GRID)."""
+    wi, wo = brdffit.ubo_pairs()
+    model = brdffit.models.get("lafortune")
+    truth = {"kd": [0.2] * 3, "rho": [1.0] * 3, "cx": -1.0, "cz": 1.0, "n": 50.0}
+    values = np.asarray(model.eval(model.check_params(truth), wi, wo))
+    r = brdffit.fit(brdffit.Measurement(wi, wo, values, grid="ubo81", name="mirror lobe"), "lafortune", solver=solver)
+    assert r.converged and r.metrics["rel_rmse"] < 1e-6, (r.status, r.metrics["rel_rmse"], r.params)

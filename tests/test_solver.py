@@ -41,7 +41,7 @@ def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
     mdl = resolve_model("ggx", 3)
     start = np.asarray(start, float)
     args = (np.zeros((0, 0)), start[None, :], prep.data, np.asarray(lo, float), np.asarray(hi, float),
-            np.asarray(free, bool), start, subset_rows(meas.n_samples))
+            np.asarray(free, bool), start, subset_rows(prep.data))
     out, _, _ = run_fit(mdl, loss, solver, 1e-9, 0.0, 200, 1, args, grid=False)
     return out["v"], float(out["loss"]), int(out["code"]), int(out["steps"])
 

@@ -234,7 +234,7 @@ def fit(
         for lobe in _init.switched_off_lobes(solve_space, np.asarray(v)):
             # A lobe the solve switched off: try it again at every roughness (linear parameters solved
             # at each, the fit itself one more candidate), and keep what lowers the loss.
-            note(f"re-seeding {lobe}: the fit switched it off")
+            note(f"re-seeding the lobe of {lobe[0]}: the fit switched it off")
             pts = _init.reseed_points(solve_space, np.asarray(v), lobe)
             again = (pts, np.asarray(v, np.float64)[None, :]) + args[2:]
             out2, c_s, r_s = run_fit(m, loss, solver, rtol, atol, max_steps, 1, again, grid=True, note=note)

@@ -13,7 +13,8 @@ Grid (structure-aware, small, so that the start costs less than the solve):
 
 * roughness and exponents get ``POINTS_ROUGHNESS`` values on a log axis (``POINTS_LOBES`` for
   repeated lobes), other nonlinear
-  parameters (Fresnel f0, shape) ``POINTS_OTHER`` values;
+  parameters (Fresnel f0, shape) ``POINTS_OTHER`` values; a parameter that declares its grid
+  values (``Param.grid``: Lafortune's C) those;
 * lobes of one kind in a composite (``ggx1``, ``ggx2``) are started at *separated* roughnesses:
   only strictly increasing combinations (ggx1.alpha < ggx2.alpha), so one lobe takes the sharp
   peak and the other the broad sheen; their other nonlinear parameters share one grid value;
@@ -60,6 +61,11 @@ ROLE_RANGE = {"roughness": (1e-3, 1.0), "exponent": (1.0, 1e4), "fresnel": (0.0,
 #: data set of a shape); the solver then works on all of them. A start only has to land in the
 #: right basin.
 GRID_SAMPLES = 768
+#: Of those, the brightest used samples (f cos theta_i, largest channel) are always among them: a
+#: narrow specular peak lies on a few mirror samples (81 of UBO-81's 6561), which a random subset
+#: holds about ten of; without them the grid could not tell a start with the lobe from one without
+#: (issue 28: the default start dropped a measured material's narrow lobe).
+GRID_PEAK_SAMPLES = 96
 #: Projected coordinate-descent sweeps after the clipped unconstrained solution.
 SWEEPS = 4
 
@@ -67,6 +73,9 @@ _NAME = re.compile(r"^(?P<kind>[a-z_]+?)(?P<index>\d+)\.(?P<suffix>.+)$")
 
 
 def _axis(p: Param, lo: float, hi: float, k: int) -> np.ndarray:
+    if p.grid is not None:  # the model's own values for the start (inside this fit's bounds)
+        values = np.unique(np.clip(np.asarray(p.grid, np.float64), lo, hi))
+        return values
     a = lo if np.isfinite(lo) else (p.lower if np.isfinite(p.lower) else ROLE_RANGE.get(p.role, (0.0, 1.0))[0])
     b = hi if np.isfinite(hi) else (p.upper if np.isfinite(p.upper) else ROLE_RANGE.get(p.role, (0.0, 1.0))[1])
     if not np.isfinite(lo) and a > min(b, hi):
@@ -257,6 +266,21 @@ def _subset_index(n: int) -> np.ndarray | None:
     return np.sort(np.random.default_rng(0).choice(n, GRID_SAMPLES, replace=False))
 
 
+def subset_index(data: Data) -> np.ndarray | None:
+    """Rows the grid scores for ``data``: GRID_PEAK_SAMPLES brightest used samples and the rest of
+    the fixed pseudo-random subset (GRID_SAMPLES in all, sorted), or None (all rows)."""
+    n = data[0].shape[0]
+    idx = _subset_index(n)
+    if idx is None:
+        return None
+    ref, sqrt_w, cos_i = (np.asarray(a) for a in (data[2], data[3], data[4]))
+    score = np.max(np.where(np.isfinite(ref), ref, -np.inf) * cos_i, axis=-1)
+    score = np.where(np.asarray(sqrt_w).reshape(n, -1).max(axis=-1) > 0, score, -np.inf)
+    peak = np.argsort(-score, kind="stable")[:GRID_PEAK_SAMPLES]
+    rest = idx[~np.isin(idx, peak)][: GRID_SAMPLES - len(peak)]
+    return np.sort(np.concatenate([peak, rest]))
+
+
 def take_rows(data: Data, idx) -> Data:
     """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
@@ -264,7 +288,7 @@ def take_rows(data: Data, idx) -> Data:
 
 
 def subset(data: Data) -> Data:
-    idx = _subset_index(data[0].shape[0])
+    idx = subset_index(data)
     return data if idx is None else take_rows(data, idx)
 
 
@@ -284,32 +308,29 @@ def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: in
 
 # -- lobes a composite fit switched off ------------------------------------------------------------
 
-def switched_off_lobes(space, v) -> list[str]:
-    """The lobes (``ggx1``, ...) of a composite fit at ``v`` whose every scale (linear parameter) is on
-    its lower bound 0 while the lobe has free nonlinear parameters: where a lobe is off, its roughness
-    and Fresnel have no effect on the loss, so a solver stopped there has not tried them (issue 28:
-    lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0; scipy found a fit 12 %
-    lower)."""
+def switched_off_lobes(space, v) -> list[tuple[str, ...]]:
+    """The lobes (``Model.lobes``: their parameter names) of a fit at ``v`` whose every scale (linear
+    parameter) is on its lower bound 0 while the lobe has free nonlinear parameters. Where a lobe is
+    off, its shape has no effect on the loss, so a solver stopped there never tried it (issue 28:
+    lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0, scipy 12 % lower; a
+    Lafortune mirror lobe started where the grid's rho was 0 stopped at rel_rmse 0.087)."""
     m = space.model
     slices = dict(m.slices())
-    lobes: dict[str, list] = {}
-    for p in m.params:
-        if "." in p.name:
-            lobes.setdefault(p.name.split(".", 1)[0], []).append(p)
+    linear = {p.name: p.linear for p in m.params}
     off = []
-    for lobe, params in lobes.items():
-        scales = [slices[p.name] for p in params if p.linear]
-        shapes = [slices[p.name] for p in params if not p.linear]
+    for lobe in m.lobes:
+        scales = [slices[n] for n in lobe.params if linear[n]]
+        shapes = [slices[n] for n in lobe.params if not linear[n]]
         if not scales or not any(space.free[s].any() for s in shapes):
             continue
         if all(np.all((v[s] <= space.lo[s]) & (space.lo[s] == 0.0)) for s in scales):
-            off.append(lobe)
+            off.append(tuple(lobe.params))
     return off
 
 
-def reseed_points(space, v, lobe: str) -> np.ndarray:
-    """Grid points (G, nonlinear parameters) for :func:`vp_grid`: the fit at ``v`` with ``lobe``'s
-    nonlinear parameters moved over the default grid's axes (its roughness on POINTS_ROUGHNESS
+def reseed_points(space, v, lobe: tuple[str, ...]) -> np.ndarray:
+    """Grid points (G, nonlinear parameters) for :func:`vp_grid`: the fit at ``v`` with the nonlinear
+    parameters named in ``lobe`` moved over the default grid's axes (its roughness on POINTS_ROUGHNESS
     values, the others on POINTS_OTHER); every linear parameter is solved again at each point."""
     m = space.model
     slices = dict(m.slices())
@@ -317,7 +338,7 @@ def reseed_points(space, v, lobe: str) -> np.ndarray:
     for p in (p for p in m.params if not p.linear):
         s = slices[p.name]
         base.append(float(np.mean(v[s])))
-        if p.name.startswith(lobe + ".") and space.free[s].any():
+        if p.name in lobe and space.free[s].any():
             i = s.start
             k = POINTS_ROUGHNESS if p.role in ("roughness", "exponent") else POINTS_OTHER
             axes.append((len(base) - 1, _axis(p, space.lo[i], space.hi[i], k)))

@@ -106,10 +106,10 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
     return run
 
 
-def subset_rows(n: int) -> np.ndarray:
-    """Rows the grid scores (``init.GRID_SAMPLES`` of them, or all)."""
-    idx = _init._subset_index(n)
-    return np.arange(n) if idx is None else idx
+def subset_rows(data: Data) -> np.ndarray:
+    """Rows the grid scores (``init.subset_index``: the brightest samples among them), or all."""
+    idx = _init.subset_index(data)
+    return np.arange(data[0].shape[-2]) if idx is None else idx
 
 
 @functools.lru_cache(maxsize=64)
@@ -127,7 +127,7 @@ def program_args(model: Model, space, data: Data, given: np.ndarray, grid: bool 
     anchor = space.clip(model.default_vector())
     pts = _grid_points(model, lo.tobytes(), hi.tobytes(), free.tobytes(), anchor.tobytes()) if grid else np.zeros((0, 0))
     return (pts, np.asarray(given, np.float64).reshape(-1, model.n_free), data, lo, hi, free, anchor,
-            subset_rows(data[0].shape[-2]))
+            subset_rows(data))
 
 
 def run_fit(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, k: int, args,

@@ -98,6 +98,10 @@ class Param:
     #: Plausible range (finite, inside the bounds), applied with ``fit(..., physical=True)``.
     #: None: the bounds themselves (allowed only where both are finite).
     physical: tuple[float, float] | None = None
+    #: The values the default start's grid tries (inside the bounds); None: the grid's own axis over
+    #: the bounds (``brdffit.fitting.init``). For a parameter whose useful values the bounds do not
+    #: say (Lafortune's C, whose length trades against rho).
+    grid: tuple[float, ...] | None = None
 
     def __post_init__(self):
         if self.channels not in (1, 3):
