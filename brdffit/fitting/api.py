@@ -232,11 +232,13 @@ def fit(
         v, value, code, steps, v0 = out["v"], float(out["loss"]), int(out["code"]), int(out["steps"]), out["start"]
         metrics, jtj = {k: float(x) for k, x in out["metrics"].items()}, out["jtj"]
         for lobe in _init.switched_off_lobes(solve_space, np.asarray(v)):
-            # A lobe the solve switched off: try it again at every roughness (linear parameters solved
-            # at each, the fit itself one more candidate), and keep what lowers the loss.
+            # A lobe the solve switched off: try it again at every roughness, scored on every sample
+            # (linear parameters solved at each, the fit itself one more candidate), and keep what
+            # lowers the loss.
             note(f"re-seeding the lobe of {lobe[0]}: the fit switched it off")
             pts = _init.reseed_points(solve_space, np.asarray(v), lobe)
-            again = (pts, np.asarray(v, np.float64)[None, :]) + args[2:]
+            every_row = np.arange(np.asarray(data[0]).shape[0])  # a narrow peak the subset missed counts
+            again = (pts, np.asarray(v, np.float64)[None, :]) + args[2:7] + (every_row,)
             out2, c_s, r_s = run_fit(m, loss, solver, rtol, atol, max_steps, 1, again, grid=True, note=note)
             compile_s, run_s = compile_s + c_s, run_s + r_s
             if float(out2["loss"]) < value:

@@ -61,11 +61,6 @@ ROLE_RANGE = {"roughness": (1e-3, 1.0), "exponent": (1.0, 1e4), "fresnel": (0.0,
 #: data set of a shape); the solver then works on all of them. A start only has to land in the
 #: right basin.
 GRID_SAMPLES = 768
-#: Of those, the brightest used samples (f cos theta_i, largest channel) are always among them: a
-#: narrow specular peak lies on a few mirror samples (81 of UBO-81's 6561), which a random subset
-#: holds about ten of; without them the grid could not tell a start with the lobe from one without
-#: (issue 28: the default start dropped a measured material's narrow lobe).
-GRID_PEAK_SAMPLES = 96
 #: Projected coordinate-descent sweeps after the clipped unconstrained solution.
 SWEEPS = 4
 
@@ -267,18 +262,10 @@ def _subset_index(n: int) -> np.ndarray | None:
 
 
 def subset_index(data: Data) -> np.ndarray | None:
-    """Rows the grid scores for ``data``: GRID_PEAK_SAMPLES brightest used samples and the rest of
-    the fixed pseudo-random subset (GRID_SAMPLES in all, sorted), or None (all rows)."""
-    n = data[0].shape[0]
-    idx = _subset_index(n)
-    if idx is None:
-        return None
-    ref, sqrt_w, cos_i = (np.asarray(a) for a in (data[2], data[3], data[4]))
-    score = np.max(np.where(np.isfinite(ref), ref, -np.inf) * cos_i, axis=-1)
-    score = np.where(np.asarray(sqrt_w).reshape(n, -1).max(axis=-1) > 0, score, -np.inf)
-    peak = np.argsort(-score, kind="stable")[:GRID_PEAK_SAMPLES]
-    rest = idx[~np.isin(idx, peak)][: GRID_SAMPLES - len(peak)]
-    return np.sort(np.concatenate([peak, rest]))
+    """Rows the grid scores for ``data`` (the fixed pseudo-random subset), or None (all rows). A lobe
+    the subset misses (a narrow peak on a few mirror samples) and the solve then switches off is
+    tried again on every row (:func:`reseed_points`, ``api.fit``)."""
+    return _subset_index(data[0].shape[0])
 
 
 def take_rows(data: Data, idx) -> Data:
