@@ -203,3 +203,24 @@ def test_a_noise_free_lafortune_mirror_lobe_is_reached(solver):
     values = np.asarray(model.eval(model.check_params(truth), wi, wo))
     r = brdffit.fit(brdffit.Measurement(wi, wo, values, grid="ubo81", name="mirror lobe"), "lafortune", solver=solver)
     assert r.converged and r.metrics["rel_rmse"] < 1e-6, (r.status, r.metrics["rel_rmse"], r.params)
+
+
+@pytest.mark.parametrize("k", [5, 12, 20])
+def test_masked_few_sample_tables_fit_like_the_small_measurement(k):
+    """k valid samples of GGX data (alpha 0.2, ks 0.5) inside a UBO table, the rest weight 0 or NaN:
+    the same fit as those k samples given as a small measurement (exact). Before, the grid's random
+    subset of 768 rows held about k/9 of them and the fit ended "converged" on a needle lobe (ks 2e5,
+    alpha 3e-4)."""
+    wi, wo = brdffit.ubo_pairs()
+    values = np.asarray(brdffit.models.get("ggx").eval(GGX, wi, wo))
+    keep = np.random.default_rng(3 + k).choice(len(wi), k, replace=False)
+    w = np.zeros(len(wi))
+    w[keep] = 1.0
+    nan = values.copy()
+    nan[np.setdiff1d(np.arange(len(wi)), keep)] = np.nan
+    small = brdffit.fit(brdffit.Measurement(wi[keep], wo[keep], values[keep]), "ggx")
+    for m in (brdffit.Measurement(wi, wo, values, w, grid="ubo81"), brdffit.Measurement(wi, wo, nan, grid="ubo81")):
+        r = brdffit.fit(m, "ggx")
+        assert r.converged and r.n_used == k
+        for name in ("kd", "ks", "alpha", "f0"):
+            np.testing.assert_allclose(r.params[name], small.params[name], rtol=1e-4, atol=1e-8, err_msg=name)
