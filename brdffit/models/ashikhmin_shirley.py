@@ -41,7 +41,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -75,6 +75,12 @@ def halfwidth(p):
     return 2.0 * math.acos(2.0 ** (-1.0 / max(p["nu"], p["nv"])))
 
 
+def sampling(p):
+    """The specular term has no scale of its own: isolated by rd = 0; the diffuse one is what the
+    rd-only albedo holds beyond it."""
+    return (Proposal("half_power", (p("nu"), p("nv"))), Proposal("cosine", scales=("rd",), minus=0))
+
+
 MODEL = Model(
     name="ashikhmin_shirley",
     params=PARAMS,
@@ -83,4 +89,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

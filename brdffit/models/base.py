@@ -164,6 +164,20 @@ class Lobe:
 
 
 @dataclasses.dataclass(frozen=True)
+class Proposal:
+    """One term of a model as importance sampling sees it (``brdffit.render.sampling`` draws from a
+    mixture of these): ``kind`` cosine | ggx | beckmann | power | half_power, its ``shape``
+    (ggx/beckmann: (alpha_u, alpha_v); power: (n, cx, cz); half_power: (nu, nv)), the model's own
+    names of the scale parameters that weigh it, and ``minus``: the index of a proposal whose albedo
+    is included in this one's when it is isolated (subtract it)."""
+
+    kind: str
+    shape: tuple[float, ...] = ()
+    scales: tuple[str, ...] = ()
+    minus: int | None = None
+
+
+@dataclasses.dataclass(frozen=True)
 class Model:
     """A BRDF model: name, parameter table, formula, citation.
 
@@ -199,6 +213,9 @@ class Model:
     #: whose BSDF this formula reproduces loads, from checked parameters as float64 NumPy arrays of
     #: the declared sizes. None for brdffit's own models. See :meth:`native`.
     to_native: Callable[[Mapping[str, np.ndarray]], dict] | None = None
+    #: ``sampling(p) -> tuple[Proposal, ...]``: the terms importance sampling draws from, with
+    #: ``p(name)`` a parameter's value (float). None: cosine sampling (valid, not fast).
+    sampling: Callable[[Callable[[str], float]], tuple[Proposal, ...]] | None = None
 
     def __post_init__(self):
         if self.lobes is None:

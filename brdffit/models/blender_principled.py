@@ -51,7 +51,7 @@ import jax.numpy as jnp
 
 from . import _cycles_math as cy
 from . import _math as m
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 PARAMS = (
     Param("base_color", 3, 0.0, 1.0, 0.8, "albedo", doc="Base Color"),
@@ -118,6 +118,12 @@ def to_native(p) -> dict:
     }
 
 
+def sampling(p):
+    """GGX of alpha = roughness^2; the diffuse share is what base_color adds."""
+    a = p("roughness") ** 2
+    return (Proposal("ggx", (a, a)), Proposal("cosine", scales=("base_color",), minus=0))
+
+
 MODEL = Model(
     name="blender:principled",
     params=PARAMS,
@@ -130,4 +136,5 @@ MODEL = Model(
     lobes=(Lobe("blender:principled", ("metallic", "roughness", "ior", "specular_tint")),),
     halfwidth=halfwidth,
     to_native=to_native,
+    sampling=sampling,
 )

@@ -41,7 +41,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -63,6 +63,11 @@ def halfwidth(p):
     return 2.0 * math.acos(2.0 ** (-1.0 / p["n"]))
 
 
+def sampling(p):
+    n = p("n")
+    return (Proposal("cosine", scales=("kd",)), Proposal("half_power", (n, n), ("ks",)))
+
+
 MODEL = Model(
     name="blinn_phong",
     params=PARAMS,
@@ -71,4 +76,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

@@ -44,7 +44,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -84,6 +84,11 @@ def halfwidth(p):
     return 2.0 * math.atan(p["alpha"] * math.sqrt(math.log(2.0)))
 
 
+def sampling(p):
+    a = p("alpha")
+    return (Proposal("cosine", scales=("kd",)), Proposal("beckmann", (a, a), ("ks",)))
+
+
 MODEL = Model(
     name="cook_torrance",
     params=PARAMS,
@@ -92,4 +97,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

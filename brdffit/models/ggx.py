@@ -45,7 +45,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -88,6 +88,11 @@ def halfwidth(p):
     return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
 
 
+def sampling(p):
+    a = p("alpha")
+    return (Proposal("cosine", scales=("kd",)), Proposal("ggx", (a, a), ("ks",)))
+
+
 MODEL = Model(
     name="ggx",
     params=PARAMS,
@@ -96,4 +101,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

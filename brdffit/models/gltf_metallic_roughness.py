@@ -36,7 +36,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 PARAMS = (
     Param("base_color", 3, 0.0, 1.0, 0.5, "albedo", doc="baseColorFactor"),
@@ -76,6 +76,12 @@ def to_native(p) -> dict:
     }
 
 
+def sampling(p):
+    """GGX of alpha = roughness^2; the diffuse share is what base_color adds."""
+    a = p("roughness") ** 2
+    return (Proposal("ggx", (a, a)), Proposal("cosine", scales=("base_color",), minus=0))
+
+
 MODEL = Model(
     name="gltf:metallic_roughness",
     params=PARAMS,
@@ -86,4 +92,5 @@ MODEL = Model(
     lobes=(Lobe("gltf:metallic_roughness", ("metallic", "roughness")),),
     halfwidth=halfwidth,
     to_native=to_native,
+    sampling=sampling,
 )

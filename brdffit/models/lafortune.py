@@ -53,7 +53,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 INF = math.inf
 
@@ -105,6 +105,12 @@ def halfwidth(p):
     return math.acos(2.0 ** (-1.0 / p["n"]))
 
 
+def _sampling(suffixes, p):
+    """A cosine lobe for kd and a cos^n lobe about each C (importance sampling)."""
+    return (Proposal("cosine", scales=("kd",)),) + tuple(
+        Proposal("power", (p("n" + x), p("cx" + x), p("cz" + x)), ("rho" + x,)) for x in suffixes)
+
+
 @functools.lru_cache(maxsize=None)
 def lafortune(lobes: int = 1) -> Model:
     """The Lafortune model with ``lobes`` lobes (see module doc for the parameter names)."""
@@ -125,6 +131,7 @@ def lafortune(lobes: int = 1) -> Model:
         doc=__doc__,
         halfwidth=halfwidth,
         lobes=tuple(Lobe("lafortune", tuple(q + s for q in ("rho", "cx", "cz", "n"))) for s in suffixes),
+        sampling=functools.partial(_sampling, suffixes),
     )
 
 

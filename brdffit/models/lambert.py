@@ -25,7 +25,7 @@ import math
 
 import jax.numpy as jnp
 
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -39,6 +39,10 @@ def formula(p, wi, wo):
     return jnp.reshape(p["kd"], (1, -1)) / jnp.pi
 
 
+def sampling(p):
+    return (Proposal("cosine", scales=("kd",)),)
+
+
 MODEL = Model(
     name="lambert",
     params=PARAMS,
@@ -46,4 +50,5 @@ MODEL = Model(
     citation="J. H. Lambert, Photometria, 1760",
     reciprocal=True,
     doc=__doc__,
+    sampling=sampling,
 )

@@ -55,7 +55,7 @@ import jax.numpy as jnp
 
 from . import _math as m
 from ._mitsuba_math import fresnel_dielectric, ggx_d, ggx_halfwidth, rgb, smith_g1
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 #: The clearcoat lobe's fixed shadowing roughness and its Fresnel F0 (Mitsuba, after Burley 2012).
 CLEARCOAT_G_ALPHA, CLEARCOAT_F0 = 0.25, 0.04
@@ -165,6 +165,15 @@ def halfwidth(p):
     return ggx_halfwidth({"alpha": max(0.001, float(p["roughness"]) ** 2)})  # the isotropic width
 
 
+def sampling(p):
+    """The main GGX lobe; the diffuse, sheen and clearcoat shares are what their scales add (the
+    GTR1 clearcoat sampled as a GGX lobe of its alpha)."""
+    a = max(0.001, p("roughness") ** 2)
+    a_c = 0.1 + (0.001 - 0.1) * p("clearcoat_gloss")
+    return (Proposal("ggx", (a, a)), Proposal("cosine", scales=("base_color",), minus=0),
+            Proposal("cosine", scales=("sheen",), minus=0), Proposal("ggx", (a_c, a_c), ("clearcoat",), minus=0))
+
+
 MODEL = Model(
     name="mitsuba:principled",
     params=PARAMS,
@@ -175,4 +184,5 @@ MODEL = Model(
     lobes=(Lobe("mitsuba:principled", tuple(p.name for p in PARAMS if p.name != "base_color")),),
     halfwidth=halfwidth,
     to_native=to_native,
+    sampling=sampling,
 )

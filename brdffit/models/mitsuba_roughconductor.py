@@ -36,7 +36,7 @@ import jax.numpy as jnp
 
 from . import _math as m
 from ._mitsuba_math import fresnel_conductor, ggx_d, ggx_halfwidth, rgb, smith_g1
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 PARAMS = (
     Param("alpha", 1, 1e-4, 1.0, 0.1, "roughness", doc="GGX roughness (Mitsuba alpha)"),
@@ -65,6 +65,11 @@ def to_native(p) -> dict:
     }
 
 
+def sampling(p):
+    a = p("alpha")
+    return (Proposal("ggx", (a, a)),)
+
+
 MODEL = Model(
     name="mitsuba:roughconductor",
     params=PARAMS,
@@ -76,4 +81,5 @@ MODEL = Model(
     lobes=(Lobe("mitsuba:roughconductor", ("alpha", "eta", "k")),),
     halfwidth=ggx_halfwidth,
     to_native=to_native,
+    sampling=sampling,
 )

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 from . import _math as m
 from ._mitsuba_math import (external_transmittance, fresnel_dielectric, ggx_d, ggx_halfwidth, internal_reflectance,
                             lerp_table, rgb, smith_g1)
-from .base import Lobe, Model, Param
+from .base import Lobe, Model, Param, Proposal
 
 #: The exterior medium's IOR written into every export (vacuum): eta = int_ior.
 EXT_IOR = 1.0
@@ -80,6 +80,11 @@ def to_native(p) -> dict:
     }
 
 
+def sampling(p):
+    a = p("alpha")
+    return (Proposal("cosine", scales=("diffuse_reflectance",)), Proposal("ggx", (a, a), ("specular_reflectance",)))
+
+
 MODEL = Model(
     name="mitsuba:roughplastic",
     params=PARAMS,
@@ -91,4 +96,5 @@ MODEL = Model(
     lobes=(Lobe("mitsuba:roughplastic", ("alpha", "int_ior", "specular_reflectance")),),
     halfwidth=ggx_halfwidth,
     to_native=to_native,
+    sampling=sampling,
 )

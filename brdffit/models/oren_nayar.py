@@ -36,7 +36,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -56,6 +56,10 @@ def formula(p, wi, wo):
     return p["kd"] / jnp.pi * (a + b * cos_dphi_sin_tan)
 
 
+def sampling(p):
+    return (Proposal("cosine", scales=("kd",)),)
+
+
 MODEL = Model(
     name="oren_nayar",
     lobes=(),  # a diffuse term (a composite has at most one): no specular lobe to order
@@ -64,4 +68,5 @@ MODEL = Model(
     citation="M. Oren, S. K. Nayar, Generalization of Lambert's Reflectance Model, SIGGRAPH 1994",
     reciprocal=True,
     doc=__doc__,
+    sampling=sampling,
 )

@@ -42,7 +42,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -68,6 +68,10 @@ def halfwidth(p):
     return math.acos(2.0 ** (-1.0 / p["n"]))
 
 
+def sampling(p):
+    return (Proposal("cosine", scales=("kd",)), Proposal("power", (p("n"), -1.0, 1.0), ("ks",)))
+
+
 MODEL = Model(
     name="phong",
     params=PARAMS,
@@ -77,4 +81,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

@@ -39,7 +39,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -60,6 +60,10 @@ def halfwidth(p):
     return math.acos(2.0 ** (-1.0 / p["n"]))
 
 
+def sampling(p):
+    return (Proposal("cosine", scales=("kd",)), Proposal("power", (p("n"), -1.0, 1.0), ("ks",)))
+
+
 MODEL = Model(
     name="phong_classic",
     params=PARAMS,
@@ -68,4 +72,5 @@ MODEL = Model(
     reciprocal=False,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

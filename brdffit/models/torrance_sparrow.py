@@ -46,7 +46,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 from .cook_torrance import microfacet_lobe
@@ -75,6 +75,13 @@ def halfwidth(p):
     return 2.0 * p["m"] * math.sqrt(math.log(2.0))
 
 
+def sampling(p):
+    """The Gaussian in the half angle is sampled as Beckmann of alpha = m (the same lobe for small
+    angles, tan th ~ th)."""
+    a = p("m")
+    return (Proposal("cosine", scales=("kd",)), Proposal("beckmann", (a, a), ("ks",)))
+
+
 MODEL = Model(
     name="torrance_sparrow",
     params=PARAMS,
@@ -84,4 +91,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

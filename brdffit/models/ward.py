@@ -36,7 +36,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
-from .base import Model, Param
+from .base import Model, Param, Proposal
 
 INF = math.inf
 
@@ -63,6 +63,11 @@ def halfwidth(p):
     return 2.0 * math.atan(min(p["alpha_x"], p["alpha_y"]) * math.sqrt(math.log(2.0)))
 
 
+def sampling(p):
+    """Ward's exponent is the anisotropic Beckmann one."""
+    return (Proposal("cosine", scales=("kd",)), Proposal("beckmann", (p("alpha_x"), p("alpha_y")), ("ks",)))
+
+
 MODEL = Model(
     name="ward",
     params=PARAMS,
@@ -71,4 +76,5 @@ MODEL = Model(
     reciprocal=True,
     doc=__doc__,
     halfwidth=halfwidth,
+    sampling=sampling,
 )

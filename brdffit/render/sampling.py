@@ -5,8 +5,9 @@ weight is divided from). What this module adds is a sampling *density*: a valid 
 directions that follows the model's lobes, with ``sample`` drawing exactly from the density
 ``pdf`` returns. A mismatch between density and BRDF only costs noise, never bias.
 
-Lobes (what each model's terms are sampled with; directions in Mitsuba's local frame, ``wi`` the
-given direction -- towards the camera -- and ``wo`` the sampled one -- towards the light):
+Lobes (what each model's terms are sampled with, declared in the model's own file as
+``Model.sampling``; directions in Mitsuba's local frame, ``wi`` the given direction -- towards the
+camera -- and ``wo`` the sampled one -- towards the light):
 
 =================  ==========================================================================
 lobe               proposal
@@ -64,51 +65,19 @@ def _scalar(params, name) -> float:
 
 
 def _base_lobes(name: str, p, q) -> list[Lobe]:
-    """Lobes of one base model. ``p(own_name)`` gives a parameter value; ``q(own_name)`` the
+    """Lobes of one base model, as its own file declares them (``Model.sampling``, a tuple of
+    ``models.base.Proposal``). ``p(own_name)`` gives a parameter value; ``q(own_name)`` the
     composite name of a scale parameter (None when the composite holds it at 0)."""
-    s = lambda *names: tuple(n for n in (q(x) for x in names) if n is not None)  # noqa: E731
-    if name in ("lambert", "oren_nayar"):
-        return [Lobe("cosine", scales=s("kd"))]
-    if name == "ggx":
-        a = p("alpha")
-        return [Lobe("cosine", scales=s("kd")), Lobe("ggx", (a, a), s("ks"))]
-    if name == "cook_torrance":
-        a = p("alpha")
-        return [Lobe("cosine", scales=s("kd")), Lobe("beckmann", (a, a), s("ks"))]
-    if name == "torrance_sparrow":
-        a = p("m")
-        return [Lobe("cosine", scales=s("kd")), Lobe("beckmann", (a, a), s("ks"))]
-    if name == "ward":
-        return [Lobe("cosine", scales=s("kd")), Lobe("beckmann", (p("alpha_x"), p("alpha_y")), s("ks"))]
-    if name in ("phong", "phong_classic"):
-        return [Lobe("cosine", scales=s("kd")), Lobe("power", (p("n"), -1.0, 1.0), s("ks"))]
-    if name == "blinn_phong":
-        n = p("n")
-        return [Lobe("cosine", scales=s("kd")), Lobe("half_power", (n, n), s("ks"))]
-    if name == "ashikhmin_shirley":
-        # the specular term has no scale of its own: isolated by rd = 0; the diffuse one is what
-        # the rd-only albedo holds beyond it
-        return [Lobe("half_power", (p("nu"), p("nv")), ()), Lobe("cosine", scales=s("rd"), minus=0)]
-    m = re.fullmatch(r"lafortune(\d*)", name)
-    if m:
-        lobes = int(m.group(1) or 1)
-        suffixes = ("",) if lobes == 1 else tuple(str(j) for j in range(1, lobes + 1))
-        return [Lobe("cosine", scales=s("kd"))] + [
-            Lobe("power", (p("n" + x), p("cx" + x), p("cz" + x)), s("rho" + x)) for x in suffixes
-        ]
-    if name in ("mitsuba:roughconductor", "mitsuba:roughplastic"):
-        a = p("alpha")
-        diffuse = [Lobe("cosine", scales=s("diffuse_reflectance"))] if q("diffuse_reflectance") else []
-        return diffuse + [Lobe("ggx", (a, a), s("specular_reflectance") if q("specular_reflectance") else ())]
-    if name == "mitsuba:principled":
-        a = max(0.001, p("roughness") ** 2)
-        a_c = 0.1 + (0.001 - 0.1) * p("clearcoat_gloss")  # GTR1's alpha; sampled as a GGX lobe of it
-        return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0),
-                Lobe("cosine", scales=s("sheen"), minus=0), Lobe("ggx", (a_c, a_c), s("clearcoat"), minus=0)]
-    if name in ("gltf:metallic_roughness", "blender:principled"):
-        a = p("roughness") ** 2  # alpha = roughness^2 in both; the diffuse share is what base_color adds
-        return [Lobe("ggx", (a, a), ()), Lobe("cosine", scales=s("base_color"), minus=0)]
-    return [Lobe("cosine", scales=s("kd"))]  # an unknown model: cosine sampling (valid, not fast)
+    from ..models import get
+
+    try:
+        model = get(name)
+    except KeyError:
+        model = None
+    s = lambda names: tuple(n for n in (q(x) for x in names) if n is not None)  # noqa: E731
+    if model is None or model.sampling is None:
+        return [Lobe("cosine", scales=s(("kd",)))]  # no declaration: cosine sampling (valid, not fast)
+    return [Lobe(x.kind, tuple(float(v) for v in x.shape), s(x.scales), x.minus) for x in model.sampling(p)]
 
 
 def _components(model):
