@@ -25,7 +25,7 @@ import tempfile
 import threading
 from pathlib import Path
 
-from .errors import UsageError
+from .errors import InputError, UsageError
 
 _MARK = ".brdffit-"
 _RENAME_NOREPLACE, _RENAME_EXCHANGE = 1, 2
@@ -46,6 +46,18 @@ STOP_REQUESTED = threading.Event()
 _GUARD = threading.RLock()
 _RESERVED: dict[str, Path] = {}
 _COMMITTED: list[Path] = []
+
+
+def read_input(path: str | os.PathLike, expected: str) -> bytes:
+    """The bytes of the input file ``path``, or one ``InputError`` naming it: a folder where a file
+    (``expected``, e.g. "a fit file (JSON)") was expected, or a file that cannot be read."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(path, f"is a folder, not {expected}")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
 
 
 def _hidden(path: Path, what: str) -> str:
@@ -219,33 +231,38 @@ def _release(fd: int, lock: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_file(path: str | os.PathLike, force: bool = False, suffix: str | None = None):
-    """Yield a temporary path beside ``path``; on success it is renamed onto ``path``."""
-    path = Path(path)
-    with reserve(path, force, folder=False):
-        fd, name = tempfile.mkstemp(prefix=_hidden(path, "new-"), suffix=suffix or path.suffix, dir=path.absolute().parent)
-        os.close(fd)
-        tmp = Path(name)
+def _atomic(path: Path, force: bool, folder: bool, make_tmp):
+    """Reserve ``path``, yield the temporary entry ``make_tmp(path)`` made beside it, commit it onto
+    ``path`` on success; the temporary entry is removed in every case."""
+    with reserve(path, force, folder=folder):
+        tmp = make_tmp(path)
         try:
-            _usual_mode(tmp, folder=False)
+            _usual_mode(tmp, folder=folder)
             yield tmp
             _commit(tmp, path, force)
         finally:
             _remove(tmp)
+
+
+def _new_file(path: Path, suffix: str | None) -> Path:
+    fd, name = tempfile.mkstemp(prefix=_hidden(path, "new-"), suffix=suffix or path.suffix, dir=path.absolute().parent)
+    os.close(fd)
+    return Path(name)
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike, force: bool = False, suffix: str | None = None):
+    """Yield a temporary path beside ``path``; on success it is renamed onto ``path``."""
+    with _atomic(Path(path), force, False, lambda p: _new_file(p, suffix)) as tmp:
+        yield tmp
 
 
 @contextlib.contextmanager
 def atomic_dir(path: str | os.PathLike, force: bool = False):
     """Yield a temporary folder beside ``path``; on success it replaces ``path`` as a whole."""
-    path = Path(path)
-    with reserve(path, force, folder=True):
-        tmp = Path(tempfile.mkdtemp(prefix=_hidden(path, "new-"), dir=path.absolute().parent))
-        try:
-            _usual_mode(tmp, folder=True)
-            yield tmp
-            _commit(tmp, path, force)
-        finally:
-            _remove(tmp)
+    make = lambda p: Path(tempfile.mkdtemp(prefix=_hidden(p, "new-"), dir=p.absolute().parent))  # noqa: E731
+    with _atomic(Path(path), force, True, make) as tmp:
+        yield tmp
 
 
 def forget_committed() -> None:

@@ -237,3 +237,26 @@ def test_an_exact_fit_is_converged_whatever_the_solver(model, params):
     values = np.asarray(m.eval(m.check_params(params), wi, wo))
     r = brdffit.fit(brdffit.Measurement(wi, wo, values, grid="ubo81"), model, solver="gauss_newton")
     assert r.metrics["rel_rmse"] < 1e-12 and r.converged, (r.status, r.metrics["rel_rmse"])
+
+
+def test_the_default_start_is_bounded_whatever_the_number_of_lobes():
+    """The grid is a product over the nonlinear parameters: mitsuba:principled's 656 100 points asked
+    for 88 GB, and lafortune3 died asking for 112 GB. It is capped at GRID_MAX_POINTS (a fixed draw
+    from the product, every roughness value still in it) and scored in batches of GRID_BATCH."""
+    from brdffit.fitting import init
+    from brdffit.fitting.api import parameter_space
+
+    for name in ("mitsuba:principled", "lafortune3", "lafortune6", "lambert+ggx+ggx+ggx"):
+        space = parameter_space(brdffit.models.get(name))
+        anchor = space.clip(space.model.default_vector())
+        pts = init.grid_for(space.model, space.lo, space.hi, space.free, anchor)
+        assert 0 < len(pts) <= init.GRID_MAX_POINTS, (name, len(pts))
+        rough = [j for j, p in enumerate(q for q in space.model.params if not q.linear) if p.role == "roughness"]
+        for j in rough:
+            assert len(set(pts[:, j])) >= 5, (name, j)  # the roughness axis survives the draw
+
+
+@pytest.mark.slow
+def test_lafortune3_fits_the_bundled_sample(sample):
+    r = brdffit.fit(sample, "lafortune3")
+    assert r.converged and r.metrics["rel_rmse"] < brdffit.fit(sample, "lafortune").metrics["rel_rmse"]

@@ -96,23 +96,11 @@ def _camera_to_world(mi, view: np.ndarray):
 
 def scene_dict(bsdf, height: int, width: int, light: np.ndarray, view: np.ndarray) -> dict:
     from .._mitsuba import mitsuba
-    from ..render.scene import _light_to_world
+    from ..render.scene import direct_scene
 
-    mi = mitsuba()
-    return {
-        "type": "scene",
-        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-        "sensor": {
-            "type": "orthographic",
-            "to_world": _camera_to_world(mi, view),
-            "film": {"type": "hdrfilm", "width": int(width), "height": int(height), "pixel_format": "rgb",
-                     "rfilter": {"type": "box"}},
-            "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
-        },
-        "square": {"type": "rectangle", "bsdf": bsdf},
-        "light": {"type": "directional", "to_world": _light_to_world(mi, light),
-                  "irradiance": {"type": "rgb", "value": float(1.0 / light[2])}},
-    }
+    sampler = {"type": "stratified", "sample_count": 1, "jitter": False}
+    return direct_scene(_camera_to_world(mitsuba(), view), width, height, sampler,
+                        {"square": {"type": "rectangle", "bsdf": bsdf}}, light, 1.0 / light[2])
 
 
 def render_maps(maps: ParameterMaps, pairs) -> np.ndarray:

@@ -197,13 +197,10 @@ class FitResult:
         path = None
         text = source
         if isinstance(source, os.PathLike) or (isinstance(source, str) and not source.lstrip().startswith("{")):
+            from .._files import read_input
+
             path = Path(source)
-            if path.is_dir():
-                raise InputError(path, "is a folder, not a fit file (JSON)")
-            try:
-                text = path.read_bytes()
-            except OSError as exc:
-                raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+            text = read_input(path, "a fit file (JSON)")
         d = parse_fit_text(text, path)
         return cls.from_dict(d, path=path)
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import read_input
 from .._providers import provider
 from ..errors import InputError
 from ..measurement import Measurement
@@ -58,12 +59,7 @@ def check_tensor_file(path: str | Path) -> dict[str, tuple[int, tuple[int, ...]]
     Returns name -> (type code, shape); raises ``InputError`` naming the file otherwise.
     """
     path = Path(path)
-    if path.is_dir():
-        raise InputError(path, "is a folder, not an RGL tensor_file .bsdf")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+    data = read_input(path, "an RGL tensor_file .bsdf")
     size = len(data)
     if size == 0:
         raise InputError(path, "empty file (expected an RGL tensor_file .bsdf)")

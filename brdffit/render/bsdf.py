@@ -141,20 +141,26 @@ def mixture_sampling(variant: str):
     return MixtureSampling
 
 
-@functools.cache
-def _callback_class(variant: str):
-    """The CallbackBSDF class of one Mitsuba variant, defined on first use (it subclasses mi.BSDF)."""
-    from .._mitsuba import symbolic_scope, user_mitsuba
-    from .sampling import Mixture
+def bsdf_class_setup(variant: str):
+    """(mi, dr, scalar, sampling) for a Python BSDF class of ``variant``, which must be the active
+    one: the Mitsuba and Dr.Jit modules, whether it is a scalar variant, :func:`mixture_sampling`."""
+    from .._mitsuba import user_mitsuba
 
     mi = user_mitsuba()
     if mi.variant() != variant:
         raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
     import drjit as dr
 
-    scalar = variant.startswith("scalar")
+    return mi, dr, variant.startswith("scalar"), mixture_sampling(variant)
 
-    sampling = mixture_sampling(variant)
+
+@functools.cache
+def _callback_class(variant: str):
+    """The CallbackBSDF class of one Mitsuba variant, defined on first use (it subclasses mi.BSDF)."""
+    from .._mitsuba import symbolic_scope
+    from .sampling import Mixture
+
+    mi, dr, scalar, sampling = bsdf_class_setup(variant)
 
     class CallbackBSDF(mi.BSDF):
         """A reflective BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.

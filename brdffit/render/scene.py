@@ -104,37 +104,36 @@ def _sampler(spp: int) -> dict:
     return {"type": "independent", "sample_count": spp}
 
 
-def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) -> dict:
-    """The Mitsuba scene description (see the module docstring)."""
+def direct_scene(camera_to_world, width: int, height: int, sampler: dict, shapes: dict, light: np.ndarray,
+                 irradiance: float) -> dict:
+    """A scene of brdffit's renders: an orthographic camera, the given shapes, one directional light,
+    direct illumination only (one emitter sample, no BSDF sample). The validation sphere below and a
+    BTF's square (``brdffit.btf.validate``) are the two."""
     mi = mitsuba()
     return {
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
         "sensor": {
             "type": "orthographic",
-            # The orthographic camera images [-1, 1]^2 of its local x, y: the unit sphere fills it.
-            "to_world": _look_at(mi, (0, 0, 3), (0, 0, 0), (0, 1, 0)),
-            "film": {
-                "type": "hdrfilm",
-                "width": size,
-                "height": size,
-                "pixel_format": "rgb",
-                "rfilter": {"type": "box"},
-            },
-            "sampler": _sampler(spp),
+            "to_world": camera_to_world,
+            "film": {"type": "hdrfilm", "width": int(width), "height": int(height), "pixel_format": "rgb",
+                     "rfilter": {"type": "box"}},
+            "sampler": sampler,
         },
-        "sphere": {
-            "type": "sphere",
-            # Parameterisation pole to +y: see "Tangent frame" in the module docstring.
-            "to_world": mi.ScalarTransform4f().rotate(axis=[1, 0, 0], angle=-90.0),
-            "bsdf": bsdf,
-        },
-        "light": {
-            "type": "directional",
-            "to_world": _light_to_world(mi, light),
-            "irradiance": {"type": "rgb", "value": float(irradiance)},
-        },
+        **shapes,
+        "light": {"type": "directional", "to_world": _light_to_world(mi, light),
+                  "irradiance": {"type": "rgb", "value": float(irradiance)}},
     }
+
+
+def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) -> dict:
+    """The Mitsuba scene description (see the module docstring)."""
+    mi = mitsuba()
+    # The orthographic camera images [-1, 1]^2 of its local x, y: the unit sphere fills it.
+    camera = _look_at(mi, (0, 0, 3), (0, 0, 0), (0, 1, 0))
+    # Parameterisation pole to +y: see "Tangent frame" in the module docstring.
+    sphere = {"type": "sphere", "to_world": mi.ScalarTransform4f().rotate(axis=[1, 0, 0], angle=-90.0), "bsdf": bsdf}
+    return direct_scene(camera, size, size, _sampler(spp), {"sphere": sphere}, light, irradiance)
 
 
 def render_sphere(

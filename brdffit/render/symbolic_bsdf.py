@@ -24,18 +24,9 @@ def _key(name: str) -> str:
 
 @functools.cache
 def _symbolic_class(variant: str):
-    from .._mitsuba import user_mitsuba
+    from .bsdf import bsdf_class_setup
 
-    mi = user_mitsuba()
-    if mi.variant() != variant:
-        raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
-    import drjit as dr
-
-    from .bsdf import mixture_sampling
-
-    scalar = variant.startswith("scalar")
-
-    sampling = mixture_sampling(variant)
+    mi, dr, scalar, sampling = bsdf_class_setup(variant)
 
     class SymbolicBSDF(mi.BSDF):
         """An analytic model's f_r computed by Dr.Jit from its (translated) JAX formula."""
