@@ -150,20 +150,16 @@ def test_scalar_variant_renders_the_plugin():
     assert "bsdf SymbolicBSDF" in run.stdout and float(run.stdout.split("mean")[-1]) > 0.01
 
 
-def test_a_formula_dr_jit_cannot_run_says_so_when_its_scene_is_made():
+def test_a_formula_dr_jit_cannot_run_is_refused_outside_evaluated_calls():
     """blender:principled's formula reads a table (a JAX gather the translation lacks), so its plugin
     is the JAX callback, which answers only inside brdffit.evaluated_calls(): a scene made outside it
-    is told so (it used to render black without a word); inside, nothing is said."""
-    import warnings
-
-    from brdffit.errors import BrdffitWarning
-
+    is one clear error naming the context (it used to render black without a word); inside, it loads
+    and renders the material (not black)."""
     mi = mitsuba()
     params = {"base_color": [0.6, 0.4, 0.2], "metallic": 0.1, "roughness": 0.4, "ior": 1.5, "specular_tint": 1.0}
     bsdf = brdffit.mitsuba_bsdf("blender:principled", params)
-    with pytest.warns(BrdffitWarning, match=r"brdffit\.evaluated_calls\(\)"):
+    with pytest.raises(Exception, match=r"inside brdffit\.evaluated_calls\(\)"):
         mi.load_dict(bsdf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        with brdffit.evaluated_calls():
-            mi.load_dict(bsdf)
+    with brdffit.evaluated_calls():
+        image = np.asarray(mi.render(scene(bsdf), spp=4))
+    assert image.mean() > 0.01

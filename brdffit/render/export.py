@@ -89,26 +89,21 @@ def _plugin(props):
                              f"brdffit:{model.name}", props=props)
     except Unsupported as exc:  # a formula the translation does not cover: the JAX callback
         mi = user_mitsuba()
-        _warn_unless_evaluated(mi, model, exc)
+        _refuse_unless_evaluated(mi, model, exc)
         cls = _callback_class(mi.variant())
         return cls(props, brdf=model_brdf(model, params), label=f"brdffit:{model.name}", mixture=mixture)
 
 
-def _warn_unless_evaluated(mi, model, why) -> None:
+def _refuse_unless_evaluated(mi, model, why) -> None:
     """The callback BSDF answers only inside ``brdffit.evaluated_calls()`` (Dr.Jit's symbolic mode
-    cannot call Python with arrays; it traces the BSDF and gets zeros): a scene made outside it is
-    told so once, at load time, instead of rendering black without a word."""
-    import warnings
-
+    cannot call Python with arrays; it traces the BSDF and gets zeros): a scene made outside it gets
+    one clear error naming the context, at load time, instead of rendering black without a word."""
     import drjit as dr
-
-    from ..errors import BrdffitWarning
 
     if mi.variant().startswith("scalar") or not dr.flag(dr.JitFlag.SymbolicCalls):
         return  # scalar variants and evaluated calls run the callback
-    warnings.warn(f"brdffit BSDF ({model.name}): its formula cannot run in Dr.Jit's symbolic mode ({why}); "
-                  "render scenes that hold it inside brdffit.evaluated_calls(), or they show it black",
-                  BrdffitWarning, stacklevel=2)
+    raise ValueError(f"brdffit BSDF ({model.name}): its formula cannot run in Dr.Jit's symbolic mode ({why}); "
+                     "load and render scenes that hold it inside brdffit.evaluated_calls()")
 
 
 def register_mitsuba() -> str:
