@@ -260,3 +260,19 @@ def test_the_default_start_is_bounded_whatever_the_number_of_lobes():
 def test_lafortune3_fits_the_bundled_sample(sample):
     r = brdffit.fit(sample, "lafortune3")
     assert r.converged and r.metrics["rel_rmse"] < brdffit.fit(sample, "lafortune").metrics["rel_rmse"]
+
+
+def test_fit_batch_does_not_depend_on_the_unit_of_the_data(sample):
+    """fit_batch fits a batch in one unit (the bounds are shared): the sample and a noisier copy,
+    both x1e12, fit as the originals times the factor."""
+    noisy = np.asarray(sample.values) * (1 + 0.05 * np.random.default_rng(1).standard_normal(np.shape(sample.values)))
+    tables = [np.asarray(sample.values), noisy]
+    runs = {}
+    for s in (1.0, 1e12):
+        ms = [brdffit.Measurement(sample.wi, sample.wo, t * s, grid="ubo81", name=f"x{s:g}") for t in tables]
+        runs[s] = brdffit.fit_batch(ms, "ggx")
+    for base, scaled in zip(runs[1.0], runs[1e12]):
+        assert scaled.status == base.status and scaled.options.get("data_unit") == 1e12
+        assert scaled.metrics["rel_rmse"] == pytest.approx(base.metrics["rel_rmse"], rel=1e-6)
+        np.testing.assert_allclose(np.asarray(scaled.params["ks"]) / 1e12, base.params["ks"], rtol=1e-5)
+        np.testing.assert_allclose(scaled.params["alpha"], base.params["alpha"], rtol=1e-5)

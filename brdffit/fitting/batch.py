@@ -34,7 +34,7 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from .api import DEFAULT_LOSS, DEFAULT_SOLVER, _result, _start_from, default_starts, parameter_space, space_options
 from .losses import check_loss
-from .problem import Data, prepare, resolve_model
+from .problem import Data, data_unit, in_unit, prepare, resolve_model
 from .._fit_defaults import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL
 from .program import check_solver, compiled, fit_program, program_args
 from .result import FitResult
@@ -183,7 +183,14 @@ def fit_batch(
         if starts.shape[1] != mdl.n_free:
             raise UsageError(f"fit_batch: starts have {starts.shape[1]} values, model {mdl.name} has {mdl.n_free}")
     k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
-    data = Data(*(np.stack([np.asarray(p.data[i]) for p in preps]) for i in range(6)))
+    # One unit for the batch (``problem.data_unit``: a table far from reflectance's range is fitted in
+    # units of a power of ten), so that the bounds the batch shares stay one set.
+    unit = data_unit(mdl, *preps)
+    unscale = np.where(pspace.linear_mask(), unit, 1.0)
+    solved = [in_unit(p, unit) for p in preps] if unit != 1.0 else preps
+    data = Data(*(np.stack([np.asarray(p.data[i]) for p in solved]) for i in range(6)))
+    if starts is not None and unit != 1.0:
+        starts = starts / unscale
 
     bar = None
     if progress:
@@ -196,7 +203,7 @@ def fit_batch(
         bar.start()
         task = bar.add_task(f"fit_batch {mdl.name}", total=n)
     try:
-        res = solve_batch(pspace, loss, data, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, chunk=chunk,
+        res = solve_batch(pspace.in_unit(unit), loss, data, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, chunk=chunk,
                           k=k, starts=starts, grid=grid, lanes=lanes,
                           on_chunk=None if bar is None else (lambda done: bar.update(task, advance=done)))
     finally:
@@ -206,13 +213,16 @@ def fit_batch(
     compile_s, run_s = res["compile_s"], res["run_s"]
     results = []
     for i, (m, prep) in enumerate(zip(measurements, preps)):
+        given_back = unit == 1.0  # else the metrics, J^T J and loss are computed afresh in the table's unit
         results.append(_result(
-            pspace, loss, solver, m, prep, res["v"][i], float(res["loss"][i]), int(res["code"][i]),
-            int(res["steps"][i]), res["start"][i],
-            metrics={key: float(x[i]) for key, x in res["metrics"].items()}, jtj=res["jtj"][i],
+            pspace, loss, solver, m, prep, res["v"][i] * unscale, float(res["loss"][i]) if given_back else None,
+            int(res["code"][i]), int(res["steps"][i]), res["start"][i] * unscale,
+            metrics={key: float(x[i]) for key, x in res["metrics"].items()} if given_back else None,
+            jtj=res["jtj"][i] if given_back else None,
             seconds={"compile": compile_s / n, "run": run_s / n, "init": 0.0},
             options={"max_steps": max_steps, "rtol": rtol, "atol": atol, "batch": True, "chunk": min(chunk, n),
                      "starts": k, "multistart": multistart, "init": "grid" if grid else "given",
+                     **({"data_unit": unit} if unit != 1.0 else {}),
                      **space_options(bounds, fixed, physical)},
         ))
     return results

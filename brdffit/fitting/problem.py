@@ -252,13 +252,14 @@ def homogeneous(model: Model) -> bool:
     return bool(np.all(np.asarray(model.eval(zero, d[0], d[1])) == 0.0))
 
 
-def data_unit(model: Model, prep: Prepared) -> float:
-    """1.0, or the power of ten in whose units the fit of ``model`` to ``prep`` works (see UNIT_RANGE)."""
-    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
-    used = np.asarray(prep.used)
-    if not used.any():
+def data_unit(model: Model, *preps: Prepared) -> float:
+    """1.0, or the power of ten in whose units the fit of ``model`` to ``preps`` works (see UNIT_RANGE;
+    several: one unit for a batch, from the mean over all their used samples)."""
+    parts = [np.abs(np.asarray(p.data[2])[p.used] * np.asarray(p.data[4])[p.used]).ravel() for p in preps]
+    values = np.concatenate(parts) if parts else np.zeros(0)
+    if not values.size:
         return 1.0
-    mean = float(np.mean(np.abs(np.asarray(ref)[used] * np.asarray(cos_i)[used])))
+    mean = float(np.mean(values))
     if not (np.isfinite(mean) and mean > 0) or UNIT_RANGE[0] <= mean <= UNIT_RANGE[1] or not homogeneous(model):
         return 1.0
     return float(10.0 ** round(np.log10(mean / CANONICAL_MEAN)))
