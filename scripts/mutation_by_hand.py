@@ -45,10 +45,8 @@ MUTATIONS = (
              "jnp.where(finite, jnp.where(ok, 0, 2), 3)", "jnp.where(finite, jnp.where(ok, 0, 0), 3)",
              ("tests/test_fit_status.py",)),
     Mutation("atomic_file writes straight to the target: no temporary file, no rename", "brdffit/_files.py",
-             "            yield tmp\n            _commit(tmp, path, force)\n        finally:\n            _remove(tmp)\n\n\n"
-             "@contextlib.contextmanager\ndef atomic_dir",
-             "            yield path\n        finally:\n            _remove(tmp)\n\n\n"
-             "@contextlib.contextmanager\ndef atomic_dir",
+             "    with _atomic(Path(path), force, False, lambda p: _new_file(p, suffix)) as tmp:\n        yield tmp\n",
+             "    with reserve(Path(path), force, folder=False):\n        yield Path(path)\n",
              ("tests/test_output_safety.py", "tests/test_readme_claims.py")),
     Mutation("internal errors exit 2 instead of 3", "brdffit/cli/__init__.py",
              "        return EXIT_INTERNAL\n", "        return EXIT_BAD_INPUT\n",
