@@ -1,4 +1,4 @@
-"""A generated corpus of malformed inputs through the CLI (SPEC 10, issue 9).
+"""A generated corpus of malformed inputs through the CLI (SPEC 10, issue 9), and hostile but valid ones (issue 28).
 
 Every reader (UBO image folder, EXR, NPZ, RGL tensor_file, Cornell, MERL, UTIA) and fit.json gets
 truncations at many offsets, byte flips in its header and its data, wrong sizes, wrong types,
@@ -461,3 +461,26 @@ def test_corpus_sample_through_real_executable(tmp_path):
         r = subprocess.run([*cmd, *argv], capture_output=True, text=True, timeout=300, env=env)
         assert r.returncode == 2, (case.name, r.returncode, r.stderr)  # negative: killed by a signal
         assert check(r.returncode, r.stdout, r.stderr, named, out) is None, (case.name, r.stderr)
+
+
+# -- hostile but valid: the same table in another unit (issue 28) --------------------------------------
+
+@pytest.mark.parametrize("factor", [1e-12, 1e12])
+@pytest.mark.parametrize("solver", ["lm", "scipy"])
+def test_a_table_in_another_unit_fits_as_the_original_through_the_cli(tmp_path, factor, solver):
+    """The bundled sample written again times 1e-12 and 1e12 (a radiometric unit change) and fitted by
+    ``brdffit fit``: exit 0, the same status, the scales times the factor and the shape parameters
+    as for the original table (issue 28: false "converged" 1.7x-300x worse before)."""
+    m = brdffit.load(SAMPLE)
+    fits = {}
+    for name, s in (("original", 1.0), ("scaled", factor)):
+        src = tmp_path / f"{name}.npz"
+        brdffit.save(brdffit.Measurement(m.wi, m.wo, np.asarray(m.values) * s, grid="ubo81", name=name), src)
+        assert main(["fit", str(src), "--model", "ggx", "--solver", solver, "-o", str(tmp_path / name)]) == 0
+        fits[name] = json.loads((tmp_path / name / "fit.json").read_text())
+    a, b = fits["original"], fits["scaled"]
+    assert a["converged"] == b["converged"] and a["status"] == b["status"]
+    for key in ("kd", "ks"):
+        np.testing.assert_allclose(np.asarray(b["params"][key]) / factor, a["params"][key], rtol=1e-5)
+    for key in ("alpha", "f0"):
+        np.testing.assert_allclose(b["params"][key], a["params"][key], rtol=1e-5, atol=1e-9)
