@@ -144,11 +144,23 @@ def evaluated_calls():
     old = [dr.flag(f) for f in flags]
     for f in flags:
         dr.set_flag(f, False)
+    _EVALUATED[0] += 1
     try:
         yield
     finally:
+        _EVALUATED[0] -= 1
         for f, v in zip(flags, old):
             dr.set_flag(f, v)
+
+
+#: How many :func:`evaluated_calls` blocks are open. Dr.Jit's flags are per thread, and Mitsuba makes
+#: a scene's plugins in worker threads, so a plugin's constructor asks this, not the flags.
+_EVALUATED = [0]
+
+
+def in_evaluated_calls() -> bool:
+    """Whether an :func:`evaluated_calls` block is open (in any thread of this process)."""
+    return _EVALUATED[0] > 0
 
 
 def render(scene, **kwargs):

@@ -98,9 +98,9 @@ def _refuse_unless_evaluated(mi, model, why) -> None:
     """The callback BSDF answers only inside ``brdffit.evaluated_calls()`` (Dr.Jit's symbolic mode
     cannot call Python with arrays; it traces the BSDF and gets zeros): a scene made outside it gets
     one clear error naming the context, at load time, instead of rendering black without a word."""
-    import drjit as dr
+    from .._mitsuba import in_evaluated_calls
 
-    if mi.variant().startswith("scalar") or not dr.flag(dr.JitFlag.SymbolicCalls):
+    if mi.variant().startswith("scalar") or in_evaluated_calls():
         return  # scalar variants and evaluated calls run the callback
     raise ValueError(f"brdffit BSDF ({model.name}): its formula cannot run in Dr.Jit's symbolic mode ({why}); "
                      "load and render scenes that hold it inside brdffit.evaluated_calls()")
