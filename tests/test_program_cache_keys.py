@@ -5,6 +5,7 @@ BRDFFIT_CACHE (a folder, or off in any of its spellings), else the user's cache 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -94,3 +95,27 @@ def test_enable_points_jax_at_the_folder_once(tmp_path, monkeypatch):
     finally:
         for n, value in before.items():
             jax.config.update(n, value)
+
+
+def test_loaded_programs_are_bounded(tmp_path, monkeypatch):
+    """A loaded XLA program holds about 300 memory mappings and a process may have 65 530: a test
+    worker that had loaded about 210 programs segfaulted inside XLA on the next load. The process
+    keeps the MAX_LOADED most recently used ones; the mappings of the others are let go."""
+    import jax.numpy as jnp
+
+    from brdffit.fitting import cache
+
+    monkeypatch.setenv("BRDFFIT_CACHE", str(tmp_path / "c"))
+
+    def maps() -> int:
+        with open(f"/proc/{os.getpid()}/maps") as fh:
+            return sum(1 for _ in fh)
+
+    x = jnp.arange(4.0)
+    before = maps()
+    for k in range(cache.MAX_LOADED + 40):
+        cache.compiled(("bounded-test", k), lambda k=k: (lambda a: jnp.sin(a * (k + 1)).sum()), x)
+        assert len(cache._CACHE) <= cache.MAX_LOADED
+    first = ("bounded-test", 0)
+    assert not any(key == first for key, _ in cache._CACHE)  # the least recently used went first
+    assert maps() - before < 400 * cache.MAX_LOADED
