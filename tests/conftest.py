@@ -85,3 +85,22 @@ def blender():
     if missing:
         pytest.skip(f"needs Blender (bpy 5.0 in .venv-blender): {missing}")
     return cycles
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _let_go_of_compiled_programs():
+    """After each test file, the compiled programs it loaded are let go: a loaded XLA program holds
+    about 300 memory mappings, a process may have 65 530 (vm.max_map_count), and a worker runs a
+    third of the suite (brdffit keeps at most ``fitting.cache.MAX_LOADED`` of its own; JAX's jit
+    caches keep theirs until cleared). The next file loads what it needs from the disk caches."""
+    yield
+    import gc
+    import sys
+
+    jax = sys.modules.get("jax")
+    if jax is not None:
+        jax.clear_caches()
+    cache = sys.modules.get("brdffit.fitting.cache")
+    if cache is not None:
+        cache._CACHE.clear()
+    gc.collect()
