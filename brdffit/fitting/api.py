@@ -194,7 +194,7 @@ def fit(
     unit = data_unit(m, prep)
     unscale = np.where(space.linear_mask(), unit, 1.0)
     solve_space = space.in_unit(unit)
-    data = in_unit(prep, unit).data if unit != 1.0 else prep.data
+    data = in_unit(prep, unit).data
     lo, hi, free = solve_space.lo, solve_space.hi, solve_space.free
     anchor = solve_space.clip(_start_from("defaults" if init is None else init, m, space.lo, space.hi) / unscale)
     n_starts = 1 + (default_starts(m) - 1 if multistart is None else int(multistart))

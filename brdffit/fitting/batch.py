@@ -187,9 +187,9 @@ def fit_batch(
     # units of a power of ten), so that the bounds the batch shares stay one set.
     unit = data_unit(mdl, *preps)
     unscale = np.where(pspace.linear_mask(), unit, 1.0)
-    solved = [in_unit(p, unit) for p in preps] if unit != 1.0 else preps
+    solved = [in_unit(p, unit) for p in preps]
     data = Data(*(np.stack([np.asarray(p.data[i]) for p in solved]) for i in range(6)))
-    if starts is not None and unit != 1.0:
+    if starts is not None:
         starts = starts / unscale
 
     bar = None

@@ -20,7 +20,6 @@ code, still serves there).
 from __future__ import annotations
 
 import collections
-
 import os
 import time
 from collections.abc import Callable

@@ -67,10 +67,16 @@ SWEEPS = 4
 _NAME = re.compile(r"^(?P<kind>[a-z_]+?)(?P<index>\d+)\.(?P<suffix>.+)$")
 
 
+def _points(p: Param, repeated: bool = False) -> int:
+    """How many grid values a nonlinear parameter gets (``repeated``: one of several lobes of a kind)."""
+    if p.role in ("roughness", "exponent"):
+        return POINTS_LOBES if repeated else POINTS_ROUGHNESS
+    return POINTS_OTHER
+
+
 def _axis(p: Param, lo: float, hi: float, k: int) -> np.ndarray:
     if p.grid is not None:  # the model's own values for the start (inside this fit's bounds)
-        values = np.unique(np.clip(np.asarray(p.grid, np.float64), lo, hi))
-        return values
+        return np.unique(np.clip(np.asarray(p.grid, np.float64), lo, hi))
     a = lo if np.isfinite(lo) else (p.lower if np.isfinite(p.lower) else ROLE_RANGE.get(p.role, (0.0, 1.0))[0])
     b = hi if np.isfinite(hi) else (p.upper if np.isfinite(p.upper) else ROLE_RANGE.get(p.role, (0.0, 1.0))[1])
     if not np.isfinite(lo) and a > min(b, hi):
@@ -116,8 +122,7 @@ def grid_for(model: Model, lo, hi, free, anchor) -> np.ndarray:
             if not free[i]:
                 axes.append(np.asarray([anchor[i]]))
             else:
-                rough = p.role in ("roughness", "exponent")
-                k = (POINTS_LOBES if len(cols) > 1 else POINTS_ROUGHNESS) if rough else POINTS_OTHER
+                k = _points(p, repeated=len(cols) > 1)
                 axes.append(_axis(p, lo[i], hi[i], k))
         if len(cols) == 1:
             rows = axes[0][:, None]
@@ -342,8 +347,7 @@ def reseed_points(space, v, lobe: tuple[str, ...]) -> np.ndarray:
         base.append(float(np.mean(v[s])))
         if p.name in lobe and space.free[s].any():
             i = s.start
-            k = POINTS_ROUGHNESS if p.role in ("roughness", "exponent") else POINTS_OTHER
-            axes.append((len(base) - 1, _axis(p, space.lo[i], space.hi[i], k)))
+            axes.append((len(base) - 1, _axis(p, space.lo[i], space.hi[i], _points(p))))
     points = []
     for combo in itertools.product(*(values for _, values in axes)):
         pt = np.asarray(base, dtype=np.float64)

@@ -267,5 +267,7 @@ def data_unit(model: Model, *preps: Prepared) -> float:
 
 def in_unit(prep: Prepared, unit: float) -> Prepared:
     """``prep`` with its values (and the loss floors that follow them) divided by ``unit``."""
+    if unit == 1.0:
+        return prep
     wi, wo, ref, sqrt_w, cos_i, floor = prep.data
     return dataclasses.replace(prep, data=Data(wi, wo, np.asarray(ref) / unit, sqrt_w, cos_i, np.asarray(floor) / unit))

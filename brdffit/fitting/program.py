@@ -107,7 +107,7 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
 
 
 def subset_rows(data: Data) -> np.ndarray:
-    """Rows the grid scores (``init.subset_index``: the brightest samples among them), or all."""
+    """Rows the grid scores (``init.subset_index``: drawn from the used samples), or all."""
     idx = _init.subset_index(data)
     return np.arange(data[0].shape[-2]) if idx is None else idx
 

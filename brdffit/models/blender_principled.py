@@ -45,13 +45,14 @@ Equality with Cycles, measured as a gonioreflectometer, is tested in tests/test_
 
 from __future__ import annotations
 
-import math
-
 import jax.numpy as jnp
 
 from . import _cycles_math as cy
 from . import _math as m
-from .base import Lobe, Model, Param, Proposal
+from .base import Lobe, Model, Param
+# the metal-roughness conventions it shares with glTF (GGX of alpha = roughness^2, base_color the
+# diffuse share): one lobe width and one sampling declaration for both
+from .gltf_metallic_roughness import halfwidth, sampling
 
 PARAMS = (
     Param("base_color", 3, 0.0, 1.0, 0.8, "albedo", doc="Base Color"),
@@ -97,11 +98,6 @@ def formula(p, wi, wo):
     return metallic * metal + (1.0 - metallic) * (specular + under * base / jnp.pi)
 
 
-def halfwidth(p):
-    """As ``ggx`` with alpha = roughness^2."""
-    return 2.0 * math.atan(p["roughness"] ** 2 * math.sqrt(math.sqrt(2.0) - 1.0))
-
-
 def to_native(p) -> dict:
     t = float(p["specular_tint"][0])
     return {
@@ -116,12 +112,6 @@ def to_native(p) -> dict:
             **FIXED_INPUTS,
         },
     }
-
-
-def sampling(p):
-    """GGX of alpha = roughness^2; the diffuse share is what base_color adds."""
-    a = p("roughness") ** 2
-    return (Proposal("ggx", (a, a)), Proposal("cosine", scales=("base_color",), minus=0))
 
 
 MODEL = Model(

@@ -54,7 +54,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from . import _math as m
-from ._mitsuba_math import fresnel_dielectric, ggx_d, ggx_halfwidth, rgb, smith_g1
+from ._mitsuba_math import fresnel_dielectric, ggx_halfwidth, rgb, smith_g1
 from .base import Lobe, Model, Param, Proposal
 
 #: The clearcoat lobe's fixed shadowing roughness and its Fresnel F0 (Mitsuba, after Burley 2012).
