@@ -7,11 +7,13 @@ import io
 import os
 import sys
 import tempfile
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import UsageError
 from ..grid import ubo_pairs
+from ..measurement import Measurement
 
 
 def query_directions(wi=None, wo=None) -> tuple[np.ndarray, np.ndarray, str | None]:
@@ -37,6 +39,15 @@ def query_directions(wi=None, wo=None) -> tuple[np.ndarray, np.ndarray, str | No
             k = int(np.argmax(bad))
             raise UsageError(f"{name}[{k}] = {d[k].tolist()} has length {length[k]:.6g}: directions must be unit vectors")
     return wi, wo, None
+
+
+def sampled(path, light, view, values, ok, *, name: str | None, grid: str | None, extra: dict) -> Measurement:
+    """A source that can be evaluated anywhere (MERL, RGL, UTIA) sampled at (light, view): a sample not
+    ``ok`` (below the horizon, not measured, not finite) has value 0 and weight 0, so that the table
+    keeps the requested pairs in their order and a fit skips those."""
+    ok = np.asarray(ok, dtype=bool)
+    return Measurement(wi=light, wo=view, values=np.where(ok[:, None], values, 0.0), weights=ok.astype(np.float64),
+                       name=name or Path(path).stem, source=str(path), grid=grid, extra=extra)
 
 
 # -- metadata as JSON (EXR header, NPZ member) ------------------------------------------------------

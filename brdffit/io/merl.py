@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import InputError
 from ..grid import half_diff
 from ..measurement import Measurement
-from ._common import query_directions
+from ._common import query_directions, sampled
 
 RES = (90, 90, 180)  # theta_h, theta_d, phi_d
 SCALES = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
@@ -74,15 +74,8 @@ def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     ok = above & ~negative & np.all(np.isfinite(raw), axis=1)
     if not ok.any():
         raise InputError(path, "no valid sample at the requested directions (all negative = unmeasured, or NaN)")
-    values = np.where(ok[:, None], raw * SCALES, 0.0)
-    return Measurement(
-        wi=light,
-        wo=view,
-        values=values,
-        weights=ok.astype(np.float64),
-        name=name or path.stem,
-        source=str(path),
-        grid=grid,
+    return sampled(
+        path, light, view, raw * SCALES, ok, name=name, grid=grid,
         extra={
             "format": "merl",
             "lookup": "nearest cell, sqrt(theta_h) indexing (MERL reference code)",

@@ -24,7 +24,7 @@ from .._files import read_input
 from .._providers import provider
 from ..errors import InputError
 from ..measurement import Measurement
-from ._common import query_directions
+from ._common import query_directions, sampled
 
 MAGIC = b"tensor_file\0"
 #: Mitsuba ``Struct::Type`` codes -> numpy dtype: Invalid = 0, UInt8, Int8, UInt16, Int16, UInt32,
@@ -178,15 +178,8 @@ def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     except Exception as exc:  # noqa: BLE001 - Mitsuba's own parse errors become one line
         raise InputError(path, f"Mitsuba's measured plugin cannot read it: {' '.join(str(exc).split())[:300]}") from exc
     ok = (light[:, 2] > 0) & (view[:, 2] > 0) & np.all(np.isfinite(f), axis=1)
-    f = np.where(ok[:, None], f, 0.0)
-    return Measurement(
-        wi=light,
-        wo=view,
-        values=f,
-        weights=ok.astype(np.float64),
-        name=name or path.stem,
-        source=str(path),
-        grid=grid,
+    return sampled(
+        path, light, view, f, ok, name=name, grid=grid,
         extra={
             "format": "rgl",
             "evaluation": "mitsuba measured: f_r(light, view) = eval(si.wi=view, wo=light) / cos(theta_light)",

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import InputError
 from ..grid import cartesian_to_spherical
 from ..measurement import Measurement
-from ._common import query_directions
+from ._common import query_directions, sampled
 
 SHAPE = (3, 6, 48, 6, 48)
 STEP_THETA, STEP_PHI = 15.0, 7.5
@@ -82,14 +82,8 @@ def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     light, view, grid = query_directions(wi, wo)
     values = evaluate(table, light, view)
     ok = np.all(np.isfinite(values), axis=1) & (light[:, 2] > 0) & (view[:, 2] > 0)
-    return Measurement(
-        wi=light,
-        wo=view,
-        values=np.where(ok[:, None], values, 0.0),
-        weights=ok.astype(np.float64),
-        name=name or path.stem,
-        source=str(path),
-        grid=grid,
+    return sampled(
+        path, light, view, values, ok, name=name, grid=grid,
         extra={
             "format": "utia",
             "lookup": "multilinear in (theta_i, phi_i, theta_v, phi_v), 15 / 7.5 degree steps (UTIA reference loader)",
