@@ -30,13 +30,9 @@ render | error), ``metrics.json``. ``<pair>`` is ``tlTTT_plPPP_tvTTT_pvPPP``.
 from __future__ import annotations
 
 import dataclasses
-import json
-import time
-from pathlib import Path
 
 import numpy as np
 
-from .._files import atomic_dir
 from ..errors import UsageError
 from ..grid import UBO_SIZE, ubo_directions, ubo_index
 from ..io.images import direction_name
@@ -147,8 +143,9 @@ def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bo
     with ``btf``'s photographs; see the module docstring."""
     from ..plot import btf_panel
     from ..render.metrics import image_metrics
+    from ..render.outputs import ValidationRun
 
-    t0 = time.perf_counter()
+    run = ValidationRun(out, force)  # checks the output folder before the work
     if not isinstance(maps, ParameterMaps):
         maps = ParameterMaps.load(maps)
     if tuple(maps.shape) != tuple(btf.shape):
@@ -157,9 +154,9 @@ def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bo
     photos = np.stack([btf.image(light, view) for light, view in idx]).astype(np.float64)
     if photos.shape[-1] == 1:
         photos = np.repeat(photos, 3, axis=-1)
-    t1 = time.perf_counter()
+    run.lap("read photographs")
     renders = render_maps(maps, idx)
-    t2 = time.perf_counter()
+    run.lap("render")
     mask = np.ones(btf.shape, bool)
     per = []
     for k, (light, view) in enumerate(idx):
@@ -176,24 +173,13 @@ def validate_btf(btf: BTF, maps, pairs=DEFAULT_PAIRS_DEG, *, out=None, force: bo
         p.pop("_mse")
     metrics = {"pairs": per, "overall": overall, "model": maps.model, "btf": btf.name,
                "texels": [btf.height, btf.width]}
-    seconds = {"read photographs": t1 - t0, "render": t2 - t1}
-    files: list[Path] = []
-    if out is not None:
-        out = Path(out)
-        with atomic_dir(out, force) as tmp:
-            import OpenEXR
-
-            head = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            for k, (light, view) in enumerate(idx):
-                name = direction_name(light, view)
-                for kind, img in (("photo", photos[k]), ("render", renders[k])):
-                    OpenEXR.File(head, {"RGB": np.ascontiguousarray(img, np.float32)}).write(str(tmp / f"{kind}_{name}.exr"))
-                    files.append(out / f"{kind}_{name}.exr")
-                fig = btf_panel(photos[k : k + 1], renders[k : k + 1], [name], per[k : k + 1])
-                fig.savefig(tmp / f"panel_{name}.png")
-                files.append(out / f"panel_{name}.png")
-            seconds["total"] = time.perf_counter() - t0
-            (tmp / "metrics.json").write_text(json.dumps({**metrics, "seconds": seconds}, indent=2) + "\n")
-            files.append(out / "metrics.json")
-    seconds["total"] = time.perf_counter() - t0
-    return BTFValidation(pairs=idx, photos=photos, renders=renders, metrics=metrics, files=tuple(files), seconds=seconds)
+    with run.folder():
+        for k, (light, view) in enumerate(idx if run.writing else ()):
+            name = direction_name(light, view)
+            run.exr(f"photo_{name}.exr", photos[k], "zip")
+            run.exr(f"render_{name}.exr", renders[k], "zip")
+            run.png(f"panel_{name}.png", btf_panel(photos[k : k + 1], renders[k : k + 1], [name], per[k : k + 1]))
+        run.metrics_json({**metrics, "seconds": {**run.seconds, "total": run.total()}})
+    seconds = {**run.seconds, "total": run.total()}
+    return BTFValidation(pairs=idx, photos=photos, renders=renders, metrics=metrics, files=tuple(run.files),
+                         seconds=seconds)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import io
@@ -14,6 +13,7 @@ from typing import Any
 
 from .._providers import provider
 from ..measurement import Measurement
+from .._progress import progress_bar
 from .api import fit
 from .losses import LOSSES, check_loss
 from .problem import evaluate, prepare
@@ -150,38 +150,15 @@ def compare(
     prep = prepare(measurement)
     combos = [(m, x, s) for m in models for x in losses for s in solvers]
     rows, results = [], []
-    with _progress_bar(len(combos), progress is True) as advance:
+    with progress_bar("compare", len(combos), shown=progress is True) as bar:
         for model, loss, solver in combos:
             label = f"{model} / {solver} / {loss}"
             if callable(progress):
                 progress(label)
-            advance(label)
+            bar.describe(f"fitting {label}")
             r = fit(measurement, model, loss=loss, solver=solver, **fit_options)
             rows.append(_row(r, evaluate(r.model, r.params, prep.data)))
             results.append(r)
-        advance(None)
+            bar.advance()
+        bar.describe("done")
     return Report(tuple(rows), measurement.name, tuple(results))
-
-
-@contextlib.contextmanager
-def _progress_bar(total: int, show: bool):
-    """advance(label) before each fit, advance(None) at the end; a no-op unless ``show``."""
-    if not show:
-        yield lambda label: None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    # On stderr, like every progress display of brdffit (stdout stays for results).
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=Console(stderr=True), transient=False) as bar:
-        task = bar.add_task("compare", total=total)
-        started = {"n": 0}
-
-        def advance(label):
-            if started["n"]:
-                bar.advance(task)
-            started["n"] += 1
-            bar.update(task, description=f"fitting {label}" if label else "done")
-
-        yield advance

@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .._files import atomic_dir
+from .outputs import ValidationRun
 from ..grid import ubo_pairs
 from .bsdf import Source, as_source, import_native
 from .scene import DEFAULT_SPP, disc_mask, light_directions, render_sphere
@@ -114,27 +112,6 @@ def _tag(d: np.ndarray) -> str:
     return f"t{theta:02d}_p{phi:03d}"
 
 
-def _finite_or_null(x):
-    """Metrics as strict JSON: inf (identical images' PSNR) and NaN (an all-black reference's
-    relative RMSE) become null."""
-    if isinstance(x, dict):
-        return {k: _finite_or_null(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite_or_null(v) for v in x]
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
-
-
-def _write_exr(path: Path, img: np.ndarray) -> None:
-    import OpenEXR
-
-    # RLE: lossless, fast, and the black background around the sphere packs well
-    header = {"compression": OpenEXR.RLE_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, {"RGB": np.ascontiguousarray(img, dtype=np.float32)}) as f:
-        f.write(str(path))
-
-
 def validate(
     source,
     fit,
@@ -161,23 +138,12 @@ def validate(
     from .cycles import check_renderer, cycles_material
 
     renderer = check_renderer(renderer)
-    seconds: dict[str, float] = {}
-    t = time.perf_counter()
-
-    def lap(name):
-        nonlocal t
-        now = time.perf_counter()
-        seconds[name] = seconds.get(name, 0.0) + now - t
-        t = now
+    run = ValidationRun(out, force)  # checks the output folder before the work
 
     def tell(stage, k=0, n=0):
         if progress is not None:
             progress(stage, k, n)
 
-    if out is not None:
-        from .._files import check_target
-
-        check_target(out, force)  # fail before the work, not after it
     import_native()  # in this thread, before any background thread exists
     from .bsdf import COMPILE_SECONDS
 
@@ -190,14 +156,14 @@ def validate(
 
         cycles_material(fit_src)  # a fit Cycles cannot render: one line, before any work
         cycles.worker()  # no Blender environment: one line, before any work
-    lap("load")
+    run.lap("load")
 
     ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
                              progress=lambda k, n: tell("render reference", k, n))
-    lap("render reference")
+    run.lap("render reference")
     fit_imgs = render_sphere(fit_src, dirs, size=size, irradiance=irradiance, spp=spp,
                              progress=lambda k, n: tell("render fit", k, n), renderer=renderer)
-    lap("render fit")
+    run.lap("render fit")
     compiled = COMPILE_SECONDS[n_compiled:]
 
     from concurrent.futures import ThreadPoolExecutor
@@ -216,20 +182,15 @@ def validate(
         tab_fit, _ = _table(fit_src)
         valid3 = np.broadcast_to(valid_ref[..., None], tab_ref.shape)
         table = table_metrics(tab_ref, tab_fit, valid3)
-        lap("tables")
-        # the folder appears complete or not at all: atomic_dir renames it on success only
-        tmp = stack.enter_context(atomic_dir(Path(out), force=force)) if out is not None else None
-        files: list[Path] = []
-        if tmp is not None:
+        run.lap("tables")
+        stack.enter_context(run.folder())  # the folder appears complete or not at all
+        if run.writing:
             for k, d in enumerate(dirs):
-                tag = _tag(d)
-                _write_exr(tmp / f"reference_{tag}.exr", ref_imgs[k])
-                _write_exr(tmp / f"fit_{tag}.exr", fit_imgs[k])
-                files += [Path(out) / f"reference_{tag}.exr", Path(out) / f"fit_{tag}.exr"]
-            _write_exr(tmp / "table_reference.exr", tab_ref)
-            _write_exr(tmp / "table_fit.exr", tab_fit)
-            files += [Path(out) / "table_reference.exr", Path(out) / "table_fit.exr"]
-            lap("write exr")
+                run.exr(f"reference_{_tag(d)}.exr", ref_imgs[k])
+                run.exr(f"fit_{_tag(d)}.exr", fit_imgs[k])
+            run.exr("table_reference.exr", tab_ref)
+            run.exr("table_fit.exr", tab_fit)
+            run.lap("write exr")
             from .. import plot
         per_light = []
         for k, d in enumerate(dirs):
@@ -238,12 +199,10 @@ def validate(
             phi = np.degrees(np.arctan2(d[1], d[0])) % 360
             per_light.append({"light": [float(x) for x in d], "theta_deg": float(theta), "phi_deg": float(phi), **m})
             tell("metrics", k + 1, len(dirs))
-            if tmp is not None:
-                tag = _tag(d)
+            if run.writing:
                 fig = plot.sphere_panel(ref_imgs[k], fit_imgs[k], d, metrics=per_light[k], scale=scales[k],
                                         ref_label=ref_src.label, fit_label=fit_label, irradiance=irradiance)
-                fig.savefig(tmp / f"panel_{tag}.png", dpi=90)
-                files.append(Path(out) / f"panel_{tag}.png")
+                run.png(f"panel_{_tag(d)}.png", fig, dpi=90)
                 tell("panels", k + 1, len(dirs) + 1)
         overall = summarise(per_light, ref_imgs, fit_imgs, mask)
         public = [{k: v for k, v in p.items() if not k.startswith("_")} for p in per_light]
@@ -258,18 +217,17 @@ def validate(
             "overall": overall,
             "table": table,
         }
-        if tmp is not None:
+        if run.writing:
             fig = plot.compare_table(tab_ref, tab_fit, title=(
                 f"UBO-81 table, {fit_src.label} against {ref_src.label}: RMSE {table['rmse']:.3g} 1/sr   "
                 f"rel. RMSE {table['rel_rmse']:.3g}   log-RMSE {table['log_rmse']:.3g} (RMS of the residual shown)"))
-            fig.savefig(tmp / "table.png", dpi=90)
-            files.append(Path(out) / "table.png")
+            run.png("table.png", fig, dpi=90)
             tell("panels", len(dirs) + 1, len(dirs) + 1)
-            lap("metrics and panels")
-            metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
-            (tmp / "metrics.json").write_text(json.dumps(_finite_or_null(metrics), indent=2) + "\n")
-            files.append(Path(out) / "metrics.json")
-    lap("metrics and panels" if out is not None else "metrics")
+            run.lap("metrics and panels")
+            metrics["seconds"] = run.rounded_seconds()
+            run.metrics_json(metrics)
+    run.lap("metrics and panels" if out is not None else "metrics")
+    seconds = run.seconds
     if compiled:
         # not a stage of its own: it ran in a background thread during the reference render
         seconds["jit compile (overlapped)"] = sum(compiled)
@@ -281,6 +239,6 @@ def validate(
         table_reference=tab_ref,
         table_fit=tab_fit,
         metrics=metrics,
-        files=tuple(files),
+        files=tuple(run.files),
         seconds=dict(seconds),
     )

@@ -16,8 +16,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import dataclasses
-import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -106,32 +104,21 @@ def validate_scene(
     ``fit`` and ``reference`` take what :func:`render_scene` takes. Both renders use the same
     seed, so their noise is alike and the difference is the material's.
     """
-    from .._files import atomic_dir, check_target
     from ..render.bsdf import import_native
     from ..render.metrics import exposure, image_metrics
-    from ..render.validate import _finite_or_null, _write_exr
+    from ..render.outputs import ValidationRun
 
     if int(spp) < 1:
         raise UsageError(f"spp must be >= 1, got {spp}")
-    if out is not None:
-        check_target(out, force)  # fail before the work
-    seconds: dict[str, float] = {}
-    t = time.perf_counter()
-
-    def lap(name):
-        nonlocal t
-        now = time.perf_counter()
-        seconds[name] = now - t
-        t = now
-
+    run = ValidationRun(out, force)  # checks the output folder before the work
     import_native()
     loaded = load_scene(scene, material)
     ref_label, fit_label = _source(reference).label, _source(fit).label
-    lap("load")
+    run.lap("load")
     ref_img = _render_loaded(loaded, reference, spp, seed)
-    lap("render reference")
+    run.lap("render reference")
     fit_img = _render_loaded(loaded, fit, spp, seed)
-    lap("render fit")
+    run.lap("render fit")
     del loaded
     mask = np.ones(ref_img.shape[:2], bool)
     scale = exposure(ref_img, mask)
@@ -148,19 +135,16 @@ def validate_scene(
         "seed": int(seed),
         "image": m,
     }
-    lap("metrics")
-    files: list[Path] = []
-    if out is not None:
-        from ..plot import scene_panel as validation_panel
+    run.lap("metrics")
+    with run.folder():
+        if run.writing:
+            from ..plot import scene_panel
 
-        with atomic_dir(Path(out), force=force) as tmp:
-            _write_exr(tmp / "reference.exr", ref_img)
-            _write_exr(tmp / "fit.exr", fit_img)
-            fig = validation_panel(ref_img, fit_img, flip_map, scale, metrics)
-            fig.savefig(tmp / "panel.png")
-            lap("write")
-            metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
-            (tmp / "metrics.json").write_text(json.dumps(_finite_or_null(metrics), indent=2) + "\n")
-        files = [Path(out) / n for n in ("reference.exr", "fit.exr", "panel.png", "metrics.json")]
-    metrics["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
-    return SceneValidation(ref_img, fit_img, np.asarray(flip_map), metrics, tuple(files), dict(seconds))
+            run.exr("reference.exr", ref_img)
+            run.exr("fit.exr", fit_img)
+            run.png("panel.png", scene_panel(ref_img, fit_img, flip_map, scale, metrics))
+            run.lap("write")
+            metrics["seconds"] = run.rounded_seconds()
+            run.metrics_json(metrics)
+    metrics["seconds"] = run.rounded_seconds()
+    return SceneValidation(ref_img, fit_img, np.asarray(flip_map), metrics, tuple(run.files), dict(run.seconds))
