@@ -6,7 +6,7 @@ SOLVERS = ("lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy")
 DEFAULT_LOSS = "log"
 DEFAULT_SOLVER = "lm"
 DEFAULT_MAX_STEPS = 200
-#: Relative tolerance on the loss (see solve.BoundedLevenbergMarquardt). 1e-6, not smaller:
+#: Relative tolerance on the loss (see solver_lm.BoundedLevenbergMarquardt). 1e-6, not smaller:
 #: a lobe narrower than the sample spacing (ks, alpha -> 0 with ks/alpha^2 fixed) lets the loss
 #: creep down by ~1e-7 per step for a hundred steps (lambert+ggx+ggx on cc_ibiza_sunset).
 DEFAULT_RTOL = 1e-6
@@ -14,7 +14,16 @@ DEFAULT_RTOL = 1e-6
 #: the data's scale).
 DEFAULT_ATOL = 0.0
 #: Starts of a composite with several lobes of one kind (``lambert+ggx+ggx``), solved at once
-#: (see fitting.api.default_starts for the measurement behind 1).
+#: (see fitting.options.default_starts for the measurement behind 1).
 COMPOSITE_STARTS = 1
 #: Solvers that ``brdffit compare`` runs by default.
 COMPARE_SOLVERS = ("lm", "optx_lm", "dogleg", "bfgs", "scipy")
+
+#: A fit's status code (FitResult.status_code, every solver's result) and its text (FitResult.status).
+STATUS_TEXT = {
+    0: "converged",
+    1: "did not converge: maximum number of steps reached",
+    2: "did not converge: the solve diverged",
+    3: "did not converge: non-finite values during the solve",
+    4: "did not converge: the solver failed",
+}

@@ -39,7 +39,7 @@ MUTATIONS = (
     Mutation("Cornell: the XYZ -> RGB matrix transposed", "brdffit/io/cornell.py",
              "m = xyz_bar @ xyz_to_rgb.T", "m = xyz_bar @ xyz_to_rgb",
              ("tests/test_io_cornell.py", "tests/test_io_cornell_reader.py")),
-    Mutation("scipy status 0 (max_nfev reached) reported as converged", "brdffit/fitting/solve.py",
+    Mutation("scipy status 0 (max_nfev reached) reported as converged", "brdffit/fitting/solver_scipy.py",
              "(1 if sol.status == 0 else 4)", "(0 if sol.status == 0 else 4)", ("tests/test_fit_status.py",)),
     Mutation("a result worse than the start (fall back to the start) reported as converged", "brdffit/fitting/solve.py",
              "jnp.where(finite, jnp.where(ok, 0, 2), 3)", "jnp.where(finite, jnp.where(ok, 0, 0), 3)",

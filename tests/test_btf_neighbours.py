@@ -57,8 +57,8 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     calls = []
     real = btf_fit._fit_texels
 
-    def recorded(data, mdl, loss, options, starts=None):
-        out = real(data, mdl, loss, options, starts)
+    def recorded(data, mdl, options, starts=None):
+        out = real(data, mdl, options, starts)
         calls.append((None if starts is None else np.array(starts), out[0]))
         return out
 
@@ -97,8 +97,8 @@ def test_texels_not_converged_from_a_neighbour_are_fitted_again_from_the_grid(sm
     calls = []
     real = btf_fit._fit_texels
 
-    def failing(data, mdl, loss, options, starts=None):
-        v, value, converged, steps = real(data, mdl, loss, options, starts)
+    def failing(data, mdl, options, starts=None):
+        v, value, converged, steps = real(data, mdl, options, starts)
         if starts is not None:  # as if every neighbour start had failed, at a higher loss
             value, converged = value * 2, np.zeros_like(converged)
         calls.append((starts is None, len(value)))
@@ -119,8 +119,8 @@ def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
     real = btf_fit._fit_texels
     calls = []
 
-    def failing(data, mdl, loss, options, starts=None):
-        v, value, converged, steps = real(data, mdl, loss, options, starts)
+    def failing(data, mdl, options, starts=None):
+        v, value, converged, steps = real(data, mdl, options, starts)
         calls.append(starts is None)
         if starts is not None:  # neighbour starts: not converged, loss x2
             value, converged = value * 2, np.zeros_like(converged)

@@ -29,7 +29,7 @@ def _default(function, parameter: str):
 def test_fit_help_states_the_extra_starts_the_api_solves():
     """The help promised 3 extra starts for a composite with repeated lobes; the API solved 0."""
     from brdffit import models
-    from brdffit.fitting.api import default_starts
+    from brdffit.fitting.options import default_starts
 
     text = _help("fit")
     said = re.search(r"Further grid starts solved beside the best one \[default: (\d+)"
@@ -54,7 +54,7 @@ def test_compare_help_states_the_losses_compare_runs():
 
 def test_fit_btf_help_states_fit_btf_s_loss_and_fit_batch_s_solver():
     from brdffit.btf.fit import fit_btf
-    from brdffit.fitting.batch import fit_batch
+    from brdffit.fitting.api import fit_batch
     from brdffit.fitting.losses import LOSSES
 
     text = _help("fit-btf")

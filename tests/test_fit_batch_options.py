@@ -9,7 +9,8 @@ import pytest
 
 import brdffit
 from brdffit import models
-from brdffit.fitting import api, fit, fit_batch
+from brdffit.fitting import driver, fit, fit_batch
+from brdffit.fitting.options import default_starts
 from test_fit_core import TRUE, _measurement
 
 
@@ -60,9 +61,9 @@ def test_the_progress_bar_counts_the_fits(two, capsys):
 
 def test_each_fits_metrics_and_gauss_newton_matrix_come_from_the_batch_program(two, monkeypatch):
     asked = []
-    real = api.compiled
-    monkeypatch.setattr(api, "compiled", lambda key, *a, **kw: (asked.append(key[0]), real(key, *a, **kw))[1])
-    monkeypatch.setattr(api, "gauss_newton_matrix", lambda *a: asked.append("gauss_newton_matrix"))
+    real = driver.compiled
+    monkeypatch.setattr(driver, "compiled", lambda key, *a, **kw: (asked.append(key[0]), real(key, *a, **kw))[1])
+    monkeypatch.setattr(driver, "gauss_newton_matrix", lambda *a: asked.append("gauss_newton_matrix"))
     batch = fit_batch(two, "ggx")
     assert asked == [], asked  # no per-fit program ran after the batch
     monkeypatch.undo()
@@ -128,7 +129,7 @@ def test_a_batch_records_what_it_solved_in_each_fits_options(two):
     for multistart in (0, 2, None):
         rs = fit_batch(two, "ggx", multistart=multistart, max_steps=5)
         single = fit(two[0], "ggx", multistart=multistart, max_steps=5)
-        want = 1 + (api.default_starts(models.get("ggx")) - 1 if multistart is None else multistart)
+        want = 1 + (default_starts(models.get("ggx")) - 1 if multistart is None else multistart)
         for r in rs:
             assert r.options["batch"] is True and r.options["chunk"] == 2
             assert r.options["starts"] == single.options["starts"] == want, (multistart, r.options)

@@ -15,7 +15,7 @@ from brdffit import models
 from brdffit.errors import UsageError
 from brdffit.fitting import LOSSES, FitResult, compare, fit, fit_batch, select
 from brdffit.fitting import losses as L
-from brdffit.fitting.api import standard_errors
+from brdffit.fitting.driver import standard_errors
 from brdffit.fitting.problem import resolve_model
 from brdffit.grid import spherical_to_cartesian
 
@@ -275,10 +275,10 @@ def test_fit_batch_matches_single_fits():
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     """seconds: compile and run of the grid start plus those of each scipy solve (time shifted by
     known amounts here, so that the sums cannot hold by chance of zero compile times)."""
-    from brdffit.fitting import api, solve
+    from brdffit.fitting import init, solver_scipy
 
     seen = {"init": [], "solve": []}
-    real_starts, real_solve = api._init.best_starts, solve.solve_scipy
+    real_starts, real_solve = init.best_starts, solver_scipy.solve_scipy
 
     def best_starts(*a, **kw):
         starts, losses, c_s, r_s = real_starts(*a, **kw)
@@ -290,8 +290,8 @@ def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
         seen["solve"].append((c_s + 10.0, r_s + 100.0))
         return (*out, c_s + 10.0, r_s + 100.0)
 
-    monkeypatch.setattr(api._init, "best_starts", best_starts)
-    monkeypatch.setattr(solve, "solve_scipy", solve_scipy)
+    monkeypatch.setattr(init, "best_starts", best_starts)
+    monkeypatch.setattr(solver_scipy, "solve_scipy", solve_scipy)
     r = fit(_measurement(n=200), "ggx", solver="scipy", multistart=2)
     assert len(seen["init"]) == 1 and len(seen["solve"]) == 3
     (c_init, r_init), = seen["init"]
@@ -305,14 +305,14 @@ def test_lm_fits_take_the_structured_normal_equations(monkeypatch):
     the generic forward-mode Jacobian of every entry (equal numbers, several times the cost:
     PERFORMANCE-NOTES). An rtol of its own makes the fit program new, and the disk cache is off
     for it, so it is traced here."""
-    from brdffit.fitting import cache, solve
+    from brdffit.fitting import cache, solver_lm
 
     monkeypatch.setitem(cache._STATE, "dir", None)
 
     def generic(*args):
         raise AssertionError("the generic forward-mode normal equations were traced")
 
-    monkeypatch.setattr(solve, "_normal_equations", generic)
+    monkeypatch.setattr(solver_lm, "_normal_equations", generic)
     r = fit(_measurement(n=200), "ggx", rtol=1.2345e-7)
     assert r.converged, r.status
 

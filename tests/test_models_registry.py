@@ -160,9 +160,9 @@ def test_linear_flags_are_exact_and_maximal(name):
 
 @pytest.mark.parametrize("name", sorted(SPEC4) + ["lambert+ggx+ggx"])
 def test_solver_box_roundtrip_and_samples_in_bounds(name):
-    """Samples lie in the bounds, and the stock solvers' map into the box (solve.to_box) is exact
+    """Samples lie in the bounds, and the stock solvers' map into the box (solver_optx.to_box) is exact
     on them with every model's bounds (infinite sides, log axes)."""
-    from brdffit.fitting.solve import from_box, to_box
+    from brdffit.fitting.solver_optx import from_box, to_box
 
     model = get(name)
     lo, hi = model.bounds()

@@ -10,7 +10,7 @@ import pytest
 
 import brdffit
 from brdffit.fitting import init as grid_init
-from brdffit.fitting.api import parameter_space
+from brdffit.fitting.space import parameter_space
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.grid import ubo_pairs
 

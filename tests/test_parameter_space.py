@@ -88,9 +88,9 @@ def test_sampling_and_fold_with_infinite_bounds():
         v = np.asarray(model.flatten(model.sample(key)))
         assert np.all(v >= 0) and np.all(v[:6] <= 1.0) and 1e-4 <= v[6] <= 1.0  # the finite range
     # Beyond the physical range (ks = 5, alpha = 30): the stock solvers' map into the box
-    # (solve.to_box) round-trips exactly with ggx's own bounds, and a step below a lower bound
+    # (solver_optx.to_box) round-trips exactly with ggx's own bounds, and a step below a lower bound
     # folds back into the box (one reflection: slope +-1).
-    from brdffit.fitting.solve import from_box, to_box
+    from brdffit.fitting.solver_optx import from_box, to_box
 
     lo, hi = model.bounds()
     assert np.isinf(hi[:6]).all() and hi[7] == 1.0
@@ -425,7 +425,7 @@ def test_fold_reflects_into_the_bounds_by_hand():
 
 
 def test_bounds_alone_or_fixed_alone_narrow_the_space_and_none_gives_the_models_own():
-    from brdffit.fitting.api import parameter_space
+    from brdffit.fitting.space import parameter_space
 
     ggx = models.get("ggx")
     alpha = dict(ggx.slices())["alpha"].start

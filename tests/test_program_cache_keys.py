@@ -119,3 +119,22 @@ def test_loaded_programs_are_bounded(tmp_path, monkeypatch):
     first = ("bounded-test", 0)
     assert not any(key == first for key, _ in cache._CACHE)  # the least recently used went first
     assert maps() - before < 400 * cache.MAX_LOADED
+
+
+def test_the_source_hash_covers_subfolders_and_paths_of_fitting_and_models_only(tmp_path):
+    """A kept program is found by brdffit's fitting and model sources: a file in a subfolder (a
+    solver family moved into a package) or a file moved changes the hash; other packages do not."""
+    for rel in ("fitting/driver.py", "fitting/solvers/lm.py", "models/ggx.py", "render/bsdf.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(f"# {rel}\n")
+    before = cache.sources_hash(tmp_path)
+    assert cache.sources_hash(tmp_path) == before  # a function of the files alone
+
+    (tmp_path / "fitting/solvers/lm.py").write_text("# lm, changed\n")
+    changed = cache.sources_hash(tmp_path)
+    assert changed != before
+    (tmp_path / "fitting/solvers/lm.py").rename(tmp_path / "fitting/solvers/bounded_lm.py")
+    assert cache.sources_hash(tmp_path) != changed  # same content, another path
+    moved = cache.sources_hash(tmp_path)
+    (tmp_path / "render/bsdf.py").write_text("# a renderer change\n")
+    assert cache.sources_hash(tmp_path) == moved

@@ -178,7 +178,7 @@ def test_switched_off_lobes_are_found_and_reseeded():
     """The detection and the re-seeding grid on their own: a lobe whose every scale is 0 is off (not
     one with a channel on, not the lambert term, which has no shape to try)."""
     from brdffit.fitting import init
-    from brdffit.fitting.api import parameter_space
+    from brdffit.fitting.space import parameter_space
 
     space = parameter_space(brdffit.models.get("lambert+ggx+ggx"))
     p = {"kd": [0.0, 0.0, 0.0], "ggx1.ks": [0.0, 0.0, 0.0], "ggx1.alpha": 0.1, "ggx1.f0": 0.04,
@@ -244,7 +244,7 @@ def test_the_default_start_is_bounded_whatever_the_number_of_lobes():
     for 88 GB, and lafortune3 died asking for 112 GB. It is capped at GRID_MAX_POINTS (a fixed draw
     from the product, every roughness value still in it) and scored in batches of GRID_BATCH."""
     from brdffit.fitting import init
-    from brdffit.fitting.api import parameter_space
+    from brdffit.fitting.space import parameter_space
 
     for name in ("mitsuba:principled", "lafortune3", "lafortune6", "lambert+ggx+ggx+ggx"):
         space = parameter_space(brdffit.models.get(name))

@@ -17,7 +17,9 @@ from brdffit import models
 from brdffit.fitting import fit, init
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.fitting.program import run_fit, subset_rows
-from brdffit.fitting.solve import BoundedLevenbergMarquardt, from_box, make_solver, to_box
+from brdffit.fitting.solve import make_solver
+from brdffit.fitting.solver_lm import BoundedLevenbergMarquardt
+from brdffit.fitting.solver_optx import from_box, to_box
 from brdffit.grid import spherical_to_cartesian
 from conftest import REPO
 

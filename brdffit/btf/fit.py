@@ -49,12 +49,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .._progress import progress_bar
 from ..errors import UsageError
 from ..fitting.problem import resolve_model
 from .maps import ParameterMaps
 from .reader import BTF
 
 RUN_FILE = "run.json"
+#: fit_btf's keyword options (``FitOptions``' fields that a batch takes).
+_OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes", "multistart", "bounds", "fixed", "physical")
 #: Texels per compiled call (solve_batch's chunk, unless fit_btf is given ``chunk``; solve_batch
 #: splits a call's texels over its worker threads): the passes over a 16 x 16 tile hold 16, 48
 #: and 192 texels.
@@ -96,7 +99,7 @@ def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, 
     return out
 
 
-def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours: bool = True) -> dict[str, np.ndarray]:
+def _fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:
     """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps.
 
     With ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse
@@ -117,14 +120,14 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
     passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]
     for texels, sources in passes:
         starts = None if sources[0] < 0 else flat[sources]
-        v, value, converged, steps = _fit_texels(Data(*(a[texels] for a in data)), mdl, loss, batch_options, starts)
+        v, value, converged, steps = _fit_texels(Data(*(a[texels] for a in data)), mdl, options, starts)
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
     # A texel started from a neighbour that did not converge (a neighbour of another material, in
     # a basin of its own) is fitted again from the grid; the lower loss is kept.
     again = np.flatnonzero(~out["converged"] & ~np.isin(np.arange(n), passes[0][0]))
     if len(again):
-        v, value, converged, steps = _fit_texels(Data(*(a[again] for a in data)), mdl, loss, batch_options)
+        v, value, converged, steps = _fit_texels(Data(*(a[again] for a in data)), mdl, options)
         better = (converged & ~out["converged"][again]) | (value < out["loss"][again])
         keep = again[better]
         flat[keep] = v[better]
@@ -137,30 +140,20 @@ def _fit_tile(btf: BTF, t: int, mdl, loss: str, batch_options: dict, neighbours:
     return out
 
 
-#: fit_btf's options that go to brdffit.fitting.batch.solve_batch as they are.
-_SOLVE_OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes")
-
-
-def _fit_texels(data, mdl, loss: str, batch_options: dict, starts=None):
-    """``fit_batch``'s array-level core (``solve_batch``: no FitResult per texel, fit_btf keeps
-    only these maps) on a batch of texels' data, from the grid, or from ``starts`` (n, P) alone.
-    Returns flat params (n, P), loss, converged, steps."""
-    from ..fitting.api import default_starts, parameter_space
-    from ..fitting.batch import solve_batch
+def _fit_texels(data, mdl, options, starts=None):
+    """The fit driver on a batch of texels' data (``driver.solve``: no FitResult per texel, fit_btf
+    keeps only these maps), from the grid, or from ``starts`` (n, P) alone. Returns flat params
+    (n, P), loss, converged, steps."""
+    from ..fitting.driver import solve
     from ..fitting.problem import Data
 
-    space = parameter_space(mdl, batch_options.get("bounds"), batch_options.get("fixed"),
-                            batch_options.get("physical", False))
-    multistart = batch_options.get("multistart")
-    k = 1 + (default_starts(mdl) - 1 if multistart is None else int(multistart))
-    options = {"chunk": GROUP, **{key: batch_options[key] for key in _SOLVE_OPTIONS if key in batch_options}}
     # Padded (repeating the last texel) to a multiple of GROUP: the calls of every pass, edge tile
     # and refit then share the few compiled shapes of full tiles' passes.
     n = len(data[0])
     pad = np.concatenate([np.arange(n), np.full(-n % GROUP, n - 1)])
-    res = solve_batch(space, loss, Data(*(a[pad] for a in data)), k=k, grid=starts is None,
-                      starts=None if starts is None else np.asarray(starts)[pad], **options)
-    return res["v"][:n], res["loss"][:n], res["code"][:n] == 0, res["steps"][:n]
+    res = solve(options.space(mdl), options, Data(*(a[pad] for a in data)), grid=starts is None, batch=True,
+                starts=None if starts is None else np.asarray(starts)[pad])
+    return res.v[:n], res.loss[:n], res.code[:n] == 0, res.steps[:n]
 
 
 def _save_tile(folder: Path, t: int, arrays: dict) -> None:
@@ -180,37 +173,6 @@ def _load_tile(folder: Path, t: int) -> dict | None:
             return {k: z[k] for k in z.files}
     except Exception:  # noqa: BLE001 - a damaged tile is fitted again
         return None
-
-
-class _Progress:
-    """rich progress bar: texels done, texels/s, time left (on a terminal, or when forced)."""
-
-    def __init__(self, enabled: bool, total: int, done: int, label: str):
-        self.bar = None
-        if not enabled:
-            return
-        from rich.console import Console
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, ProgressColumn, TextColumn,
-                                   TimeElapsedColumn, TimeRemainingColumn)
-        from rich.text import Text
-
-        class Speed(ProgressColumn):
-            def render(self, task):
-                return Text(f"{task.speed:.1f} texels/s" if task.speed else "- texels/s")
-
-        self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), Speed(),
-                            TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(),
-                            console=Console(stderr=True), transient=False)
-        self.bar.start()
-        self.task = self.bar.add_task(label, total=total, completed=done)
-
-    def advance(self, n: int) -> None:
-        if self.bar is not None:
-            self.bar.advance(self.task, n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
 
 
 def fit_btf(
@@ -238,20 +200,18 @@ def fit_btf(
     """
     import jax
 
-    from ..fitting.losses import check_loss
-    from ..fitting.program import check_solver
+    from ..fitting.options import FitOptions
 
     if not isinstance(btf, BTF):
         raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
-    loss = check_loss(loss)
-    mdl = resolve_model(model, btf.channels)
     if solver is not None:
         batch_options["solver"] = solver
-    unknown = sorted(set(batch_options) - set(_SOLVE_OPTIONS) - {"bounds", "fixed", "physical", "multistart"})
+    unknown = sorted(set(batch_options) - set(_OPTIONS))
     if unknown:
         raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
-    if "solver" in batch_options and check_solver(batch_options["solver"]) == "scipy":
-        raise UsageError("fit_btf: solver 'scipy' is not batched; choose a compiled solver")
+    options = FitOptions(loss=loss, **{"chunk": GROUP, **batch_options}).batched("fit_btf")
+    loss = options.loss
+    mdl = resolve_model(model, btf.channels)
     run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},
            "neighbours": bool(neighbours),
            "tile": btf.tile, "shape": [btf.height, btf.width]}
@@ -295,21 +255,19 @@ def fit_btf(
     sizes = {t: (lambda b: (b[1] - b[0]) * (b[3] - b[2]))(btf.tile_box(t)) for t in mine}
     enabled = sys.stderr.isatty() if progress is None else bool(progress)
     label = f"{mdl.name} on {btf.name}" + (f" (process {pid + 1}/{nproc})" if nproc > 1 else "")
-    bar = _Progress(enabled, sum(sizes.values()), sum(sizes[t] for t in results), label)
     t0 = time.perf_counter()
     fitted = 0
-    try:
+    with progress_bar(label, sum(sizes.values()), shown=enabled, done=sum(sizes[t] for t in results),
+                      rate="texels") as bar:
         for t in todo:
             if max_tiles is not None and fitted >= max_tiles:
                 return None
-            arrays = _fit_tile(btf, t, mdl, loss, batch_options, neighbours)
+            arrays = _fit_tile(btf, t, mdl, options, neighbours)
             if tiles_dir is not None:
                 _save_tile(tiles_dir, t, arrays)
             results[t] = arrays
             fitted += 1
             bar.advance(sizes[t])
-    finally:
-        bar.close()
     seconds = time.perf_counter() - t0
     n_fitted = sum(sizes[t] for t in todo)
 
@@ -322,7 +280,7 @@ def fit_btf(
             "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
             "resumed_tiles": len(mine) - len(todo), "neighbours": bool(neighbours)}
     pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],
-                       steps=maps["steps"], loss_name=loss, solver=str(batch_options.get("solver", _default_solver())),
+                       steps=maps["steps"], loss_name=loss, solver=options.solver,
                        info=info)
     if out is not None and pid == 0:
         pm.save(out, force=True)
@@ -344,14 +302,6 @@ def _lock(tiles_dir: Path):
         f.close()
         raise UsageError(f"{tiles_dir.parent}: another fit-btf run is writing there") from None
     return f
-
-
-def _default_solver() -> str:
-    import inspect
-
-    from ..fitting import fit_batch
-
-    return str(inspect.signature(fit_batch).parameters["solver"].default)
 
 
 def _assemble(btf: BTF, mdl, results: dict[int, dict]) -> dict:

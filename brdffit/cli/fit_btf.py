@@ -34,7 +34,7 @@ def _region(text: str | None):
 @click.argument("folder", type=click.Path(path_type=str))
 @click.option("--model", "-m", "model", required=True, help="Model name, e.g. ggx or lambert+ggx.")
 @click.option("--loss", default=_LOSS, show_default=True, help=" | ".join(_LOSSES))
-@click.option("--solver", default=None, cls=DefaultFrom, default_from="brdffit.fitting.batch:fit_batch(solver)",
+@click.option("--solver", default=None, cls=DefaultFrom, default_from="brdffit.fitting.api:fit_batch(solver)",
               help="Solver of fit_batch.")
 @click.option("--region", default=None, help="ROW0,ROW1,COL0,COL1 of the photographs (slice bounds).")
 @click.option("--step", type=click.IntRange(1), default=1, show_default=True, help="Fit every STEP-th texel.")

@@ -1,15 +1,27 @@
 """Fitting engine (SPEC 5): ``fit``, ``fit_batch``, ``FitResult``, ``compare``, ``Report``, ``select``.
 
-Pipeline of one fit: ``problem.prepare`` (exclude and count invalid samples, normalise weights)
--> ``space.ParameterSpace`` (bounds, ``physical=``, ``bounds=``, ``fixed=``: flat lo, hi, free)
--> ``init.best_starts`` (variable-projection grid: nonlinear parameters on a small structure-aware
-grid, linear ones by bounded least squares) -> one compiled, vmapped solve of the best starts
-(exact forward-mode Jacobians, float64): ``lm``, brdffit's bounded Levenberg-Marquardt as an
-optimistix solver class (``solve.BoundedLevenbergMarquardt``), or optimistix's stock ``optx_lm`` /
-``gauss_newton`` / ``dogleg`` / ``bfgs`` on a transformed unconstrained variable, or scipy
-``least_squares`` (TRF) as the reference -> ``FitResult`` with metrics, standard errors,
-``at_bound`` and ``warnings`` (lobes of one kind put in order by ``space.canonical``).
-Compiled code is kept on disk (``cache``).
+The modules, in the order a fit uses them (read them so):
+
+1. the problem: ``problem`` (a Measurement -> ``Data``: excluded samples, weights, the data's
+   unit), ``losses`` (the five losses and their residuals), ``structure`` (a model's linear and
+   nonlinear parts, the structured J^T J), ``linalg``;
+2. where a fit may move: ``space`` (``ParameterSpace``: bounds, ``physical=``, ``bounds=``,
+   ``fixed=``, lobes of one kind in order, ``at_bound`` and warnings);
+3. starts: ``init`` (the variable-projection grid: nonlinear parameters on a small structure-aware
+   grid, linear ones by bounded least squares; a switched-off lobe re-seeded);
+4. solvers, one family per file: ``solve`` (what a fit computes once, the best of its starts, the
+   check of a result), ``solver_lm`` (``lm``, brdffit's bounded Levenberg-Marquardt as an
+   optimistix solver), ``solver_optx`` (optimistix's stock ``optx_lm``, ``gauss_newton``,
+   ``dogleg``, ``bfgs`` on an unconstrained variable), ``solver_scipy`` (scipy's TRF, the
+   reference);
+5. compiled programs: ``program`` (one fit's program: grid, solve, metrics, J^T J), ``batch`` (it
+   mapped over many fits), ``cache`` (kept per process and on disk);
+6. the driver: ``options`` (``FitOptions``, checked once), ``driver`` (every fit runs there:
+   ``solve`` -> ``Solved``, one row per fit with its status code; ``fit_measurements`` ->
+   FitResults), ``api`` (the public ``fit`` and ``fit_batch``; ``brdffit.fit_btf`` calls the
+   driver too);
+7. results: ``result`` (``FitResult``), ``fitfile`` (the fit file's checks);
+8. choosing: ``compare`` (error against run time), ``select``.
 """
 
 from __future__ import annotations
@@ -19,8 +31,7 @@ from . import cache as _cache
 
 _cache.enable()  # before anything compiles
 
-from .api import fit  # noqa: E402
-from .batch import fit_batch  # noqa: E402
+from .api import fit, fit_batch  # noqa: E402
 from .compare import Report, compare  # noqa: E402
 from .losses import LOSSES  # noqa: E402
 from .result import FitResult  # noqa: E402

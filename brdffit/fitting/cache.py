@@ -123,16 +123,21 @@ def _library_model(model) -> bool:
 def _source_hash() -> str:
     """Hash of brdffit's fitting and model sources: a code change invalidates the exports."""
     if "source" not in _STATE:
-        import hashlib
-
-        h = hashlib.sha256()
-        root = Path(__file__).resolve().parents[1]
-        for sub in ("fitting", "models"):
-            for f in sorted((root / sub).glob("*.py")):
-                h.update(f.name.encode())
-                h.update(f.read_bytes())
-        _STATE["source"] = h.hexdigest()[:16]
+        _STATE["source"] = sources_hash(Path(__file__).resolve().parents[1])
     return _STATE["source"]
+
+
+def sources_hash(root: Path) -> str:
+    """Hash of the paths and contents of every ``.py`` file below ``root/fitting`` and
+    ``root/models``, subfolders too: a file moved or added there may shape a compiled program."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for sub in ("fitting", "models"):
+        for f in sorted((root / sub).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
 
 
 def _key_text(key, example) -> str | None:

@@ -28,7 +28,7 @@ _SCALARS: dict[str, tuple[type, ...]] = {
     "converged": (bool,),
     "loss_value": (int, float),
 }
-_COUNTS = ("steps", "n_used", "n_excluded")
+_COUNTS = ("steps", "n_used", "n_excluded", "status_code")
 _FLOAT_MAPS = ("metrics", "seconds")
 #: metric names read under today's name: the relative RMSE is ``rel_rmse`` everywhere (SPEC 5, 13);
 #: the image metrics called it ``relative_rmse`` before

@@ -273,7 +273,7 @@ def subset_index(data: Data) -> np.ndarray | None:
     so that masked samples do not crowd out the data (issue 28: 5 valid samples in a UBO table were
     about 0.6 in a random subset, and the fit ended on a needle lobe the same samples given alone
     did not). None: all rows. A lobe the subset misses (a narrow peak on a few mirror samples) and
-    the solve then switches off is tried again on every row (:func:`reseed_points`, ``api.fit``)."""
+    the solve then switches off is tried again on every row (:func:`reseed_points`, ``driver.solve``)."""
     n = data[0].shape[0]
     idx = _subset_index(n)
     if idx is None:

@@ -8,7 +8,7 @@ directions / values, so no NaN can leak from them into a residual or a gradient.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import dataclasses
 import functools
@@ -27,16 +27,16 @@ if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed
     from jaxtyping import Array, Float
 
 
-class Data(tuple):
-    """(wi, wo, ref, sqrt_w, cos_i, floor): a pytree (a tuple) of arrays."""
+class Data(NamedTuple):
+    """One fit's table as arrays (a pytree: JAX maps and batches it as a tuple). Rows are the used
+    samples' order; with a leading batch axis in ``fit_batch``."""
 
-    __slots__ = ()
-
-    def __new__(cls, wi, wo, ref, sqrt_w, cos_i, floor):
-        return super().__new__(cls, (wi, wo, ref, sqrt_w, cos_i, floor))
-
-
-jax.tree_util.register_pytree_node(Data, lambda d: (tuple(d), None), lambda _, c: Data(*c))
+    wi: Array  # (N, 3) light directions
+    wo: Array  # (N, 3) view directions
+    ref: Array  # (N, C) measured f_r
+    sqrt_w: Array  # (N, 1) square root of each sample's weight (0: excluded)
+    cos_i: Array  # (N, 1) cos(theta_i), clipped at the horizon
+    floor: Array  # (C,) 1 % of the mean |f_r| per channel: the relative and log losses' floor
 
 
 @dataclasses.dataclass(frozen=True)

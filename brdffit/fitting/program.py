@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import time
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -36,13 +37,6 @@ COMPILED_SOLVERS = SOLVERS[:-1]
 _ALIASES = {"levenberg_marquardt": "lm", "gn": "gauss_newton", "gaussnewton": "gauss_newton", "trf": "scipy"}
 
 
-STATUS_TEXT = {
-    0: "converged",
-    1: "did not converge: maximum number of steps reached",
-    2: "did not converge: the solve diverged",
-    3: "did not converge: non-finite values during the solve",
-    4: "did not converge: the solver failed",
-}
 
 
 def check_solver(solver: str) -> str:
@@ -89,21 +83,35 @@ def fit_program(model: Model, loss: str, solver: str, rtol: float, atol: float, 
         # Stable: among equal losses the grid (listed first) wins.
         starts = flats[jnp.argsort(values, stable=True)[:k]]
         consts = fit_constants(model, loss, data)
-        v, _, code, steps, i, jtj, l0 = solve(starts, data, lo, hi, free, consts)
-        v0 = jnp.clip(starts[i], lo, hi)
+        best = solve(starts, data, lo, hi, free, consts)
+        v, v0 = best.v, jnp.clip(starts[best.index], lo, hi)
 
         def metrics_at(u):
-            return values_metrics(model_at(u, data, consts[1]), data, (loss,))
+            return values_metrics(model_at(u, data, consts.geometry), data, (loss,))
 
         # The result's loss evaluated afresh (the metrics need the model's values anyway) checks
         # the solver's claim; a point worse than its start (or not finite) gives way to the start.
         metrics = metrics_at(v)
-        ok, code = check(metrics[loss], l0, v, code, consts[2])
+        ok, code = check(metrics[loss], best.start_loss, v, best.code, consts.loss_floor)
         metrics = jax.lax.cond(ok, lambda: metrics, lambda: metrics_at(v0))
-        return {"v": jnp.where(ok, v, v0), "loss": metrics[loss], "code": code, "steps": steps, "start": starts[i],
-                "metrics": metrics, "jtj": jnp.where(ok, jtj, jnp.nan)}
+        return {"v": jnp.where(ok, v, v0), "loss": metrics[loss], "code": code, "steps": best.steps,
+                "start": starts[best.index], "metrics": metrics, "jtj": jnp.where(ok, best.jtj, jnp.nan)}
 
     return run
+
+
+class ProgramArgs(NamedTuple):
+    """The arguments of :func:`fit_program` for one fit (batched: ``given`` and ``data`` with a
+    leading fit axis)."""
+
+    grid_points: np.ndarray  # (G, nonlinear parameters): the start grid (``init.grid_for``), or (0, 0)
+    given: np.ndarray  # (E, P): starts the caller gives, ranked beside the grid's
+    data: Data
+    lo: np.ndarray  # (P,) the box, in the table's solve unit
+    hi: np.ndarray  # (P,)
+    free: np.ndarray  # (P,) bool: False for a held parameter
+    anchor: np.ndarray  # (P,) the held parameters' values (defaults, clipped into the box)
+    subset: np.ndarray  # (S,) int: the rows the grid scores its points on
 
 
 def subset_rows(data: Data) -> np.ndarray:
@@ -121,21 +129,20 @@ def _grid_points(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes)
     return pts
 
 
-def program_args(model: Model, space, data: Data, given: np.ndarray, grid: bool = True):
+def program_args(model: Model, space, data: Data, given: np.ndarray, grid: bool = True) -> ProgramArgs:
     """The arguments of :func:`fit_program` for one fit in ``space`` (a ``ParameterSpace``)."""
-    lo, hi, free = space.lo, space.hi, space.free
+    lo, hi, free = space.lo, space.hi, np.asarray(space.free, dtype=bool)
     anchor = space.clip(model.default_vector())
     pts = _grid_points(model, lo.tobytes(), hi.tobytes(), free.tobytes(), anchor.tobytes()) if grid else np.zeros((0, 0))
-    return (pts, np.asarray(given, np.float64).reshape(-1, model.n_free), data, lo, hi, free, anchor,
-            subset_rows(data))
+    return ProgramArgs(pts, np.asarray(given, np.float64).reshape(-1, model.n_free), data, lo, hi, free, anchor,
+                       subset_rows(data))
 
 
-def run_fit(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, k: int, args,
-            grid: bool = True, note=None):
+def run_fit(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, k: int,
+            args: ProgramArgs, grid: bool = True, note=None):
     """Compile (once per process, and through the disk cache once per machine) and run one fit's
     program. Returns (outputs as NumPy, compile seconds, run seconds)."""
     # NumPy arguments go straight to the compiled call (no eager device_put per array).
-    args = args[:5] + (np.asarray(args[5], dtype=bool),) + args[6:]
     fn, compile_s = compiled(("fit", model, loss, solver, rtol, atol, max_steps, k, grid),
                              lambda: fit_program(model, loss, solver, rtol, atol, max_steps, k, grid), *args, note=note)
     t0 = time.perf_counter()

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._fit_defaults import STATUS_TEXT
 from .._providers import provider
 from ..errors import InputError
 from ..models.base import Model
@@ -38,6 +39,13 @@ def _metrics(recorded: dict) -> dict[str, float]:
     are present."""
     out = {k: float(v) for k, v in recorded.items() if METRIC_ALIASES.get(k) not in recorded}
     return {METRIC_ALIASES.get(k, k): v for k, v in out.items()}
+
+
+def _code_of(status: str, converged: bool) -> int:
+    """The status code a status text stands for (0 for any converged text, 4 for one unknown)."""
+    if converged:
+        return 0
+    return next((code for code, text in STATUS_TEXT.items() if code and text == status), 4)
 
 
 def _floats(a) -> list[float]:
@@ -76,6 +84,14 @@ class FitResult:
     #: One sentence each: a parameter on a bound, a lobe narrower than the sample spacing, a
     #: parameter the data do not determine (``brdffit.fitting.space.fit_warnings``).
     warnings: tuple[str, ...] = ()
+    #: The status as a code (``brdffit._fit_defaults.STATUS_TEXT``: 0 converged, 1 out of steps,
+    #: 2 diverged, 3 non-finite, 4 solver failed), beside ``status``'s text. None given: read
+    #: from ``status`` (fit files written before the code was recorded).
+    status_code: int | None = None
+
+    def __post_init__(self):
+        if self.status_code is None:
+            object.__setattr__(self, "status_code", _code_of(self.status, self.converged))
 
     @property
     def model_name(self) -> str:
@@ -170,6 +186,7 @@ class FitResult:
             "steps": int(self.steps),
             "converged": bool(self.converged),
             "status": self.status,
+            "status_code": int(self.status_code),
             "seconds": {k: float(v) for k, v in self.seconds.items()},
             "solver": self.solver,
             "data_name": self.data_name,
@@ -221,6 +238,7 @@ class FitResult:
             steps=int(d.get("steps", 0)),
             converged=bool(d.get("converged", False)),
             status=str(d.get("status", "")),
+            status_code=None if d.get("status_code") is None else int(d["status_code"]),
             seconds={k: float(v) for k, v in d.get("seconds", {}).items()},
             solver=str(d.get("solver", "")),
             data_name=str(d.get("data_name", "")),

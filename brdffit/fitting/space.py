@@ -246,6 +246,23 @@ class ParameterSpace:
 
 
 # -- warnings (SPEC 5: one sentence each) ------------------------------------------------------------
+def parameter_space(model: Model, bounds=None, fixed=None, physical: bool = False) -> ParameterSpace:
+    """Where a fit of ``model`` may move: flat ``lo``/``hi`` (may be infinite) and ``free`` mask, the
+    runtime arguments of the start grid and of every solver."""
+    if not bounds and not fixed:
+        return _default_space(model, bool(physical))
+    return ParameterSpace.build(model, bounds, fixed, physical)
+
+
+@functools.lru_cache(maxsize=64)
+def _default_space(model: Model, physical: bool) -> ParameterSpace:
+    """The space of a fit without overrides, built once per model (its arrays are read-only)."""
+    space = ParameterSpace.build(model, None, None, physical)
+    for a in (space.lo, space.hi, space.free, space.values):
+        a.flags.writeable = False
+    return space
+
+
 def sample_spacing(wo, max_directions: int = 2048) -> float:
     """Typical angular spacing (radians) of the distinct view directions ``wo`` (N, 3): the median
     angle from each to its nearest neighbour. 14.5 degrees on the UBO-81 grid (theta rings 15
@@ -304,7 +321,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
       and only its peak's product with the scale (e.g. ks / alpha^2 for GGX) is measured; on the
       UBO-81 grid (14.5 degrees) that is GGX alpha < 0.098, Beckmann alpha < 0.076, Phong n > 86;
     * a free parameter with no standard error that is not on a bound: the data do not determine
-      it (a near-null direction of J'J, see ``brdffit.fitting.api.standard_errors``).
+      it (a near-null direction of J'J, see ``brdffit.fitting.driver.standard_errors``).
     """
     out = []
     for name, side in at_bound.items():

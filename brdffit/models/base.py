@@ -28,7 +28,7 @@ automatic for a positive lower bound with an upper bound >= 100 times larger or 
 roughness, exponents): random parameters (``Model.sample``) are uniform on that axis. The solvers
 keep their iterates in the box themselves (``brdffit.fitting.solve``: the default ``lm`` clips each
 trial point; optimistix's stock solvers move an unconstrained variable mapped into the box by
-``solve.to_box``). That map is :func:`_fold`, a triangle wave (reflect at each finite bound; one
+``solver_optx.to_box``). That map is :func:`_fold`, a triangle wave (reflect at each finite bound; one
 reflection for a one-sided box, the identity for R), not a sigmoid: a sigmoid's derivative
 vanishes towards the bounds, and a solver whose optimum lies at a bound (kd = 0 for a metal,
 f0 = 1) crawls there. The fold has slope +-1 everywhere, so the bound is reached in one step and

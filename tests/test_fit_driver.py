@@ -1,0 +1,74 @@
+"""The fit driver (issue 29): ``fit``, ``fit_batch`` and ``fit_btf`` check their options in one
+place (``FitOptions``) and report each fit's status as a code beside its text."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import models
+from brdffit._fit_defaults import STATUS_TEXT
+from brdffit.btf import generate as gen
+from brdffit.fitting.result import FitResult
+from brdffit.grid import spherical_to_cartesian
+
+
+def _measurement(n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    wi = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    wo = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
+    g = models.get("ggx")
+    f = np.asarray(g.eval(g.check_params({"kd": [0.3, 0.2, 0.1], "ks": 0.6, "alpha": 0.15, "f0": 0.3}), wi, wo))
+    f = f * (1 + 0.01 * np.random.default_rng(seed + 1).standard_normal(f.shape))
+    return brdffit.Measurement(wi, wo, f, name="driver")
+
+
+@pytest.fixture(scope="module")
+def small_btf(tmp_path_factory):
+    model = models.get("lambert")
+    maps = gen.smooth_maps(model, 2, 2, seed=3)
+    path = gen.write_model_btf(tmp_path_factory.mktemp("driver") / "btf", model, maps, noise=0.01, seed=4)
+    return brdffit.load_btf(path, tile=2)
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"max_steps": 0}, "max_steps must be at least 1"),
+    ({"multistart": -1}, "multistart must be >= 0"),
+    ({"solver": "newton"}, "unknown solver 'newton'"),
+    ({"chunk": 0}, "chunk and lanes must be at least 1"),
+])
+def test_every_entry_point_refuses_the_same_bad_option_with_the_same_line(small_btf, bad, message):
+    """One record checks the options: fit_btf once passed max_steps=0 and multistart=-1 through to
+    the solve unchecked."""
+    m = _measurement(n=60)
+    calls = [lambda: brdffit.fit_batch([m], "ggx", **bad), lambda: brdffit.fit_btf(small_btf, "lambert", progress=False, **bad)]
+    if "chunk" not in bad:  # a batch's option; fit takes no chunk
+        calls.append(lambda: brdffit.fit(m, "ggx", **bad))
+    for call in calls:
+        with pytest.raises(brdffit.UsageError, match=message):
+            call()
+
+
+def test_the_status_code_stands_beside_its_text_and_survives_the_fit_file():
+    stopped = brdffit.fit(_measurement(), "ggx", max_steps=1, rtol=1e-15)
+    assert stopped.status_code == 1 and stopped.status == STATUS_TEXT[1] and not stopped.converged
+    done = brdffit.fit(_measurement(), "ggx")
+    assert done.status_code == 0 and done.converged
+    again = FitResult.from_json(stopped.to_json())
+    assert again.status_code == 1 and again.status == stopped.status
+    # a fit file written before the code was recorded: the code is read from the text
+    d = json.loads(stopped.to_json())
+    del d["status_code"]
+    assert FitResult.from_dict(d).status_code == 1
+    d["status"], d["converged"] = "converged (scipy least_squares)", True
+    assert FitResult.from_dict(d).status_code == 0
+
+
+def test_a_batch_reports_each_fits_own_status_code():
+    fits = brdffit.fit_batch([_measurement(seed=0), _measurement(seed=2)], "ggx", max_steps=1, rtol=1e-15)
+    assert [r.status_code for r in fits] == [1, 1]
+    fits = brdffit.fit_batch([_measurement(seed=0), _measurement(seed=2)], "ggx")
+    assert [r.status_code for r in fits] == [0, 0] and all(r.status == STATUS_TEXT[0] for r in fits)
