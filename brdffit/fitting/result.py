@@ -23,17 +23,6 @@ if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed
 FORMAT = "brdffit.fit/1"
 
 
-def _eval_compiled(model: Model, p: dict, wi, wo):
-    """``model.eval`` as one compiled program per model and shape, kept whole on disk like the fit
-    programs (``cache.compiled``): a second process (``brdffit fit`` drawing fit.png) loads it
-    without tracing or lowering it. Evaluated op by op it compiled ~60 small programs per process;
-    jitted, its tracing and lowering cost ~0.2 s of every ``brdffit fit``."""
-    from .cache import compiled  # JAX's compilation: not needed to read a fit file
-
-    fn, _ = compiled(("eval", model), lambda: model.eval, p, wi, wo)
-    return fn(p, wi, wo)
-
-
 def _metrics(recorded: dict) -> dict[str, float]:
     """A fit file's metrics, an old name read as today's (``fitfile.METRIC_ALIASES``) unless both
     are present."""
@@ -120,8 +109,9 @@ class FitResult:
             raise UsageError(f"FitResult.eval needs directions of shape (3,) or (N, 3); got {wi.shape} and {wo.shape}")
         single = wi.ndim == 1 and wo.ndim == 1
         wi2, wo2 = np.broadcast_arrays(np.atleast_2d(wi), np.atleast_2d(wo))
-        p = {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
-        f = np.array(_eval_compiled(self.model, p, wi2, wo2), dtype=np.float64)
+        from .model_eval import eval_model  # JAX's compilation: not needed to read a fit file
+
+        f = eval_model(self.model, self.params, wi2, wo2)
         f[(wi2[:, 2] <= 0) | (wo2[:, 2] <= 0)] = 0.0
         return f[0] if single else f
 

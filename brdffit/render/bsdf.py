@@ -27,17 +27,16 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import functools
-import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from .._mitsuba import evaluated_calls, mitsuba
-# Evaluating outside a render (a model's jitted formula, any Mitsuba BSDF) is in .evaluate, which
-# the sampler imports too; these names stay importable from here.
-from .evaluate import CHUNK, SMALL, _WARM, _jitted_eval, eval_bsdf, eval_model  # noqa: F401
+from .._mitsuba import evaluated_calls, mitsuba  # noqa: F401 - evaluated_calls: importable from here
+# f_r of an analytic model: the one evaluator (fitting.model_eval, FitResult.eval's too); of any
+# Mitsuba BSDF outside a render: .evaluate (eval_bsdf stays importable from here, with evaluated_calls).
+from ..fitting.model_eval import eval_model, warm
+from .evaluate import eval_bsdf  # noqa: F401
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
@@ -69,31 +68,12 @@ def import_native() -> None:
 
 
 def model_brdf(model, params) -> BrdfFn:
-    """NumPy f_r of an analytic model: the JAX ``model.eval`` (jitted), channels broadcast to 3.
-
-    Inputs are evaluated in padded chunks of :data:`CHUNK` directions, so JAX compiles the model
-    once per process (about 0.15 s) and not once per array length or parameter set.
-    """
+    """NumPy f_r of an analytic model: ``model.eval`` through the one evaluator
+    (``fitting.model_eval``: compiled once per model and chunk length, kept on disk), channels
+    broadcast to 3. Its program is compiled or loaded in the background from here on (``warm``)."""
     params = model.check_params(params)
     import_native()  # before the compile thread below starts
-    f = _jitted_eval(model)
-
-    # Compile for the CHUNK shape in a background thread now: XLA compiles without the GIL, so this
-    # overlaps with whatever comes next (in a validation: rendering the reference). Not a daemon
-    # thread: the interpreter joins it before tearing down. A daemon thread still compiling at exit
-    # comes back to a finalising interpreter, which ends it by unwinding through XLA's C++ frames:
-    # "terminate called after throwing an instance of ''" and exit status -6 (issue 13).
-    pole = np.tile(np.array([[0.0, 0.0, 1.0]]), (CHUNK, 1))
-    warm = _WARM.get(model)
-    if warm is None:
-
-        def compile_now():
-            t = time.perf_counter()
-            f(params, pole, pole).block_until_ready()
-            COMPILE_SECONDS.append(time.perf_counter() - t)
-
-        warm = _WARM[model] = threading.Thread(target=compile_now, name="brdffit-jit", daemon=False)
-        warm.start()
+    warm(model, COMPILE_SECONDS.append)
 
     def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         out = eval_model(model, params, wi, wo)

@@ -1,12 +1,12 @@
-"""f_r outside a render: an analytic model through its jitted JAX formula, any Mitsuba BSDF at
-given directions (SPEC 1's order: wi towards the light, wo towards the viewer; 1/sr, the cosine
-removed). The callback BSDF (``bsdf``), the sampler's lobe weights (``sampling``) and the RGL
-reader's evaluator (``measured``) use them.
+"""f_r outside a render: an analytic model through its compiled JAX formula (the one evaluator,
+``brdffit.fitting.model_eval``, which ``FitResult.eval`` uses too), any Mitsuba BSDF at given
+directions (SPEC 1's order: wi towards the light, wo towards the viewer; 1/sr, the cosine removed).
+The callback BSDF (``bsdf``), the sampler's lobe weights (``sampling``) and the RGL reader's
+evaluator (``measured``) use them.
 """
 
 from __future__ import annotations
 
-import functools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,49 +15,6 @@ from .._mitsuba import evaluated_calls, mitsuba
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
-
-
-#: Fixed length of the arrays handed to the jitted model: one compilation per model serves every
-#: render and table (Mitsuba hands over a different number of lanes for each light). Calls with at
-#: most SMALL directions (the scalar variant: one per call) use a second, small shape.
-CHUNK = 1 << 16
-SMALL = 16
-
-
-@functools.cache
-def _jitted_eval(model):
-    """``model.eval`` jitted with the parameters as an argument: one compilation per model serves
-    every parameter set (the fit, and the isolated lobes the sampler weighs)."""
-    import jax
-
-    return jax.jit(model.eval)
-
-
-#: (model, length) pairs compiled or being compiled in the background, and their threads.
-_WARM: dict = {}
-
-
-def eval_model(model, params, wi, wo) -> np.ndarray:
-    """(N, channels) f_r of ``model`` at ``params`` (checked), through the compiled CHUNK shape."""
-    import jax.numpy as jnp
-
-    warm = _WARM.get(model)
-    if warm is not None and warm.is_alive():
-        warm.join()  # one compilation, not two racing ones
-    f = _jitted_eval(model)
-    wi = np.asarray(wi, np.float64).reshape(-1, 3)
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    n = wi.shape[0]
-    out = np.empty((n, model.channels))
-    length = SMALL if n <= SMALL else CHUNK
-    for start in range(0, n, length):
-        stop = min(n, start + length)
-        a = np.tile(np.array([[0.0, 0.0, 1.0]]), (length, 1))
-        b = a.copy()
-        a[: stop - start] = wi[start:stop]
-        b[: stop - start] = wo[start:stop]
-        out[start:stop] = np.asarray(f(params, jnp.asarray(a), jnp.asarray(b)))[: stop - start]
-    return out
 
 
 def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:

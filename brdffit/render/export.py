@@ -145,7 +145,8 @@ def map_bsdf(model, params):
     import jax.numpy as jnp
 
     from .. import models
-    from .bsdf import CHUNK, callback_bsdf, import_native
+    from ..fitting.model_eval import CHUNK, SMALL
+    from .bsdf import callback_bsdf, import_native
     from .sampling import Mixture
 
     model = models.get(model)
@@ -171,7 +172,7 @@ def map_bsdf(model, params):
         texel = row * width + col
         n = len(texel)
         out = np.empty((n, model.channels))
-        length = 16 if n <= 16 else CHUNK  # two compiled shapes, as for a single parameter set
+        length = SMALL if n <= SMALL else CHUNK  # two compiled shapes, as for a single parameter set
         for start in range(0, n, length):
             stop = min(n, start + length)
             idx = np.zeros(length, np.int64)

@@ -102,7 +102,7 @@ def model_lobes(model, params) -> list[Lobe]:
 
 def lobe_weights(model, params, lobes: list[Lobe]) -> np.ndarray:
     """(K, len(COS_NODES)) mixture weights: each lobe's albedo share per view angle (columns sum to 1)."""
-    from .evaluate import eval_model
+    from ..fitting.model_eval import eval_model
 
     all_scales = {n for lobe in lobes for n in lobe.scales} | {
         p.name for p in model.params if p.linear and p.role == "albedo"
