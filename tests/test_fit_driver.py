@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 import brdffit
@@ -13,17 +12,7 @@ from brdffit import models
 from brdffit._fit_defaults import STATUS_TEXT
 from brdffit.btf import generate as gen
 from brdffit.fitting.result import FitResult
-from brdffit.grid import spherical_to_cartesian
-
-
-def _measurement(n=300, seed=0):
-    rng = np.random.default_rng(seed)
-    wi = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
-    wo = spherical_to_cartesian(rng.uniform(0, 1.3, n), rng.uniform(0, 2 * np.pi, n))
-    g = models.get("ggx")
-    f = np.asarray(g.eval(g.check_params({"kd": [0.3, 0.2, 0.1], "ks": 0.6, "alpha": 0.15, "f0": 0.3}), wi, wo))
-    f = f * (1 + 0.01 * np.random.default_rng(seed + 1).standard_normal(f.shape))
-    return brdffit.Measurement(wi, wo, f, name="driver")
+from test_fit_status import _measurement  # ggx with 1 % noise, 300 random pairs
 
 
 @pytest.fixture(scope="module")
