@@ -38,6 +38,21 @@ def _program(model: Model, length: int):
 
 
 def _checked(model: Model, params) -> dict[str, np.ndarray]:
+    """``params`` as float64 NumPy arrays of the declared sizes. In NumPy: ``model.check_params``
+    works in jax.numpy, whose small programs a second process would lower again (``brdffit fit``
+    drawing fit.png); it runs only to word the error of parameters that do not fit."""
+    out = {}
+    if set(params) == set(model.param_names):
+        for p in model.params:
+            v = np.atleast_1d(np.asarray(params[p.name], np.float64))
+            n = model.size(p)
+            if v.shape == (1,) and n > 1:
+                v = np.broadcast_to(v, (n,))
+            if v.shape != (n,):
+                break
+            out[p.name] = v
+        else:
+            return out
     return {k: np.asarray(v, np.float64).reshape(-1) for k, v in model.check_params(params).items()}
 
 
