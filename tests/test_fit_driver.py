@@ -61,3 +61,18 @@ def test_a_batch_reports_each_fits_own_status_code():
     assert [r.status_code for r in fits] == [1, 1]
     fits = brdffit.fit_batch([_measurement(seed=0), _measurement(seed=2)], "ggx")
     assert [r.status_code for r in fits] == [0, 0] and all(r.status == STATUS_TEXT[0] for r in fits)
+
+
+def test_scipy_is_refused_by_the_batched_entry_points_with_their_own_advice(small_btf):
+    m = _measurement(n=60)
+    with pytest.raises(brdffit.UsageError) as e:
+        brdffit.fit_batch([m], "ggx", solver="scipy")
+    assert str(e.value) == "fit_batch: solver 'scipy' is not batched; use fit() per measurement"
+    with pytest.raises(brdffit.UsageError) as e:
+        brdffit.fit_btf(small_btf, "lambert", progress=False, solver="scipy")
+    assert str(e.value) == "fit_btf: solver 'scipy' is not batched; choose a compiled solver"
+
+
+def test_a_scipy_fit_records_how_many_starts_it_solved():
+    assert brdffit.fit(_measurement(n=80), "ggx", solver="scipy").options["starts"] == 1
+    assert brdffit.fit(_measurement(n=80), "ggx", solver="scipy", multistart=2).options["starts"] == 3
