@@ -84,11 +84,9 @@ def fit(
         scene_note = _coverage_note(scene, measurement)
     options = FitOptions(loss=loss, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, multistart=multistart,
                          scipy_jac=scipy_jac, bounds=bounds, fixed=fixed, physical=physical)
-    starts = None
-    if init is not None:
-        mdl = resolve_model(model, measurement.n_channels)
-        starts = start_vector(init, mdl, options.space(mdl))[None, :]
-    result, = fit_measurements([measurement], model, options, weights=weights, starts=starts, grid=init is None,
+    mdl = resolve_model(model, measurement.n_channels)
+    starts = None if init is None else start_vector(init, mdl, options.space(mdl))[None, :]
+    result, = fit_measurements([measurement], mdl, options, weights=weights, starts=starts, grid=init is None,
                                note=progress or (lambda _message: None))
     return with_warning(result, scene_note)
 

@@ -30,7 +30,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..errors import UsageError
 from .options import FitOptions
 from .problem import Data
 from .program import compiled, fit_program, program_args
@@ -72,8 +71,6 @@ def solve_batch(space, options: FitOptions, data: Data, *, k: int = 1, starts: n
     after each chunk (from a worker thread). ``workers``: chunks run at once (default: the CPU count)."""
     mdl = space.model
     n, P = data[0].shape[0], mdl.n_free
-    if starts is None and not grid:
-        raise UsageError("fit_batch: grid=False needs starts")
     given = np.zeros((n, 0, P)) if starts is None else np.asarray(starts, np.float64).reshape(n, 1, P)
     args = program_args(mdl, space, Data(*(a[0] for a in data)), given[0], grid=grid)
     k = max(1, min(k, (len(args.grid_points) if grid else 0) + given.shape[1]))

@@ -166,8 +166,9 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     solved = [in_unit(p, unit).data for p in preps]
     data = Data(*(np.stack([np.asarray(d[i]) for d in solved]) for i in range(len(Data._fields))))
     given = None if starts is None else np.asarray(starts, np.float64) / unscale
+    k = options.starts(mdl)
     note("initialising: grid of starts" if grid else "initialising: the given start")
-    note(f"solving: {options.solver}, {options.starts(mdl)} start{'s' if options.starts(mdl) > 1 else ''}")
+    note(f"solving: {options.solver}, {k} start{'s' if k > 1 else ''}")
     res = solve(space.in_unit(unit), options, data, starts=given, grid=grid, batch=batch, note=note,
                 on_chunk=on_chunk)
     if not batch:
@@ -176,7 +177,7 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     seconds = res.seconds if not batch else {key: s / n for key, s in res.seconds.items()}
     record = {**options.record(), "starts": res.starts, "init": "grid" if grid else "given"}
     if batch:
-        record.update(batch=True, chunk=min(options.chunk, n), starts=options.starts(mdl))
+        record.update(batch=True, chunk=min(options.chunk, n))
     if unit != 1.0:
         record["data_unit"] = unit
     given_back = unit == 1.0 and res.metrics is not None  # else metrics, J^T J and loss afresh, in the table's unit

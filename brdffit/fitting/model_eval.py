@@ -33,8 +33,8 @@ def _program(model: Model, length: int):
     from .cache import compiled  # JAX: not needed to read a fit file
 
     example = ({p.name: np.zeros(model.size(p)) for p in model.params}, np.zeros((length, 3)), np.zeros((length, 3)))
-    fn, seconds = compiled(("eval", model), lambda: model.eval, *example)
-    return fn, seconds
+    fn, _ = compiled(("eval", model), lambda: model.eval, *example)
+    return fn
 
 
 def _checked(model: Model, params) -> dict[str, np.ndarray]:
@@ -68,7 +68,7 @@ def eval_model(model: Model, params, wi, wo) -> np.ndarray:
     n = wi.shape[0]
     out = np.empty((n, model.channels))
     length = SMALL if n <= SMALL else CHUNK
-    fn, _ = _program(model, length)
+    fn = _program(model, length)
     for start in range(0, n, length):
         stop = min(n, start + length)
         if stop - start == length:
