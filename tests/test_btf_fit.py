@@ -13,6 +13,7 @@ import pytest
 
 import brdffit
 from brdffit.btf import fit as btf_fit
+from brdffit.btf import tile as btf_tile
 from brdffit.btf import generate as gen
 from brdffit.btf.maps import ParameterMaps
 from brdffit.cli import main
@@ -69,7 +70,7 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
     btf = brdffit.load_btf(small_lambert, tile=2)
     assert btf.n_tiles == 4
     fresh = brdffit.fit_btf(btf, "lambert", progress=False)
-    real = btf_fit._fit_tile
+    real = btf_tile.fit_tile
     calls = []
 
     def interrupted(b, t, *args):
@@ -78,7 +79,7 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
         calls.append(t)
         return real(b, t, *args)
 
-    monkeypatch.setattr(btf_fit, "_fit_tile", interrupted)
+    monkeypatch.setattr(btf_tile, "fit_tile", interrupted)
     out = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
         brdffit.fit_btf(btf, "lambert", out=out, progress=False)
@@ -90,7 +91,7 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
         calls.append(t)
         return real(b, t, *args)
 
-    monkeypatch.setattr(btf_fit, "_fit_tile", counted)
+    monkeypatch.setattr(btf_tile, "fit_tile", counted)
     maps = brdffit.fit_btf(btf, "lambert", out=out, progress=False)
     assert calls == [2, 3]  # only the missing tiles
     assert maps.info["resumed_tiles"] == 2

@@ -8,11 +8,12 @@ import pytest
 
 import brdffit
 from brdffit.btf import fit as btf_fit
+from brdffit.btf import tile as btf_tile
 from brdffit.btf import generate as gen
 
 
 def test_passes_of_a_4x4_tile_by_hand():
-    passes = btf_fit.neighbour_passes(4, 4, strides=(4, 2, 1))
+    passes = btf_tile.neighbour_passes(4, 4, strides=(4, 2, 1))
     assert len(passes) == 3
     (t1, s1), (t2, s2), (t3, s3) = passes
     # pass 1: the stride-4 lattice is texel (0, 0) alone, started by the grid
@@ -29,7 +30,7 @@ def test_passes_of_a_4x4_tile_by_hand():
 @pytest.mark.parametrize("shape", [(16, 16), (5, 7), (1, 3), (1, 1)])
 def test_passes_cover_every_texel_once_from_earlier_passes(shape):
     h, w = shape
-    passes = btf_fit.neighbour_passes(h, w)
+    passes = btf_tile.neighbour_passes(h, w)
     seen = np.concatenate([t for t, _ in passes])
     assert sorted(seen.tolist()) == list(range(h * w))
     assert (passes[0][1] == -1).all()
@@ -55,16 +56,16 @@ def small_ggx(tmp_path_factory):
 def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     btf = brdffit.load_btf(small_ggx, tile=6)
     calls = []
-    real = btf_fit._fit_texels
+    real = btf_tile._fit_texels
 
     def recorded(data, mdl, options, starts=None):
         out = real(data, mdl, options, starts)
         calls.append((None if starts is None else np.array(starts), out[0]))
         return out
 
-    monkeypatch.setattr(btf_fit, "_fit_texels", recorded)
+    monkeypatch.setattr(btf_tile, "_fit_texels", recorded)
     with_nb = brdffit.fit_btf(btf, "ggx", progress=False)
-    passes = btf_fit.neighbour_passes(6, 6)
+    passes = btf_tile.neighbour_passes(6, 6)
     assert [c[0] is None for c in calls] == [True, False, False]  # the grid for the first pass only
     # every later texel started from the result of its nearest earlier-fitted texel
     fitted = {}
@@ -74,7 +75,7 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
         fitted.update(zip(texels.tolist(), v))
     flat = np.concatenate([with_nb.params[p.name].reshape(36, -1) for p in btf_fit.resolve_model("ggx", 3).params], 1)
     np.testing.assert_array_equal(flat, np.stack([fitted[i] for i in range(36)]))  # the maps hold those results
-    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    monkeypatch.setattr(btf_tile, "_fit_texels", real)
     grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
     assert with_nb.converged.all() and grid_only.converged.all()
     np.testing.assert_allclose(with_nb.loss, grid_only.loss, rtol=1e-6)
@@ -95,7 +96,7 @@ def test_unknown_options_are_usage_errors(small_ggx):
 def test_texels_not_converged_from_a_neighbour_are_fitted_again_from_the_grid(small_ggx, monkeypatch):
     btf = brdffit.load_btf(small_ggx, tile=6)
     calls = []
-    real = btf_fit._fit_texels
+    real = btf_tile._fit_texels
 
     def failing(data, mdl, options, starts=None):
         v, value, converged, steps = real(data, mdl, options, starts)
@@ -104,19 +105,19 @@ def test_texels_not_converged_from_a_neighbour_are_fitted_again_from_the_grid(sm
         calls.append((starts is None, len(value)))
         return v, value, converged, steps
 
-    monkeypatch.setattr(btf_fit, "_fit_texels", failing)
+    monkeypatch.setattr(btf_tile, "_fit_texels", failing)
     maps = brdffit.fit_btf(btf, "ggx", progress=False)
-    first = len(btf_fit.neighbour_passes(6, 6)[0][0])
+    first = len(btf_tile.neighbour_passes(6, 6)[0][0])
     assert calls[-1] == (True, 36 - first)  # every neighbour-started texel, once more from the grid
     assert maps.converged.all()
-    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    monkeypatch.setattr(btf_tile, "_fit_texels", real)
     grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
     np.testing.assert_array_equal(maps.loss, grid_only.loss)  # the grid's results were kept
 
 
 def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
     btf = brdffit.load_btf(small_ggx, tile=6)
-    real = btf_fit._fit_texels
+    real = btf_tile._fit_texels
     calls = []
 
     def failing(data, mdl, options, starts=None):
@@ -128,12 +129,12 @@ def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
             value, converged = value * 3, np.zeros_like(converged)
         return v, value, converged, steps
 
-    monkeypatch.setattr(btf_fit, "_fit_texels", failing)
+    monkeypatch.setattr(btf_tile, "_fit_texels", failing)
     maps = brdffit.fit_btf(btf, "ggx", progress=False)
-    monkeypatch.setattr(btf_fit, "_fit_texels", real)
+    monkeypatch.setattr(btf_tile, "_fit_texels", real)
     grid_only = brdffit.fit_btf(btf, "ggx", progress=False, neighbours=False)
     first = np.zeros(36, bool)
-    first[btf_fit.neighbour_passes(6, 6)[0][0]] = True
+    first[btf_tile.neighbour_passes(6, 6)[0][0]] = True
     first = first.reshape(6, 6)
     np.testing.assert_allclose(maps.loss[~first], 2 * grid_only.loss[~first], rtol=1e-6)  # the x2 kept, not the x3
     assert not maps.converged[~first].any() and maps.converged[first].all()
