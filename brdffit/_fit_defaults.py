@@ -26,4 +26,6 @@ STATUS_TEXT = {
     2: "did not converge: the solve diverged",
     3: "did not converge: non-finite values during the solve",
     4: "did not converge: the solver failed",
+    5: "did not converge: the model cannot reach the data",
+    6: "did not converge: the default start reaches a lower loss",
 }

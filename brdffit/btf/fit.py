@@ -103,7 +103,7 @@ def fit_btf(
     unknown = sorted(set(batch_options) - set(_OPTIONS))
     if unknown:
         raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
-    options = FitOptions(loss=loss, **{"chunk": _tile.GROUP, **batch_options}).batched("fit_btf")
+    options = FitOptions(loss=loss, **batch_options).batched("fit_btf")
     loss = options.loss
     mdl = resolve_model(model, btf.channels)
     run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},

@@ -22,10 +22,6 @@ import numpy as np
 
 from .reader import BTF
 
-#: Texels per compiled call (solve_batch's chunk, unless fit_btf is given ``chunk``; solve_batch
-#: splits a call's texels over its worker threads): the passes over a 16 x 16 tile hold 16, 48
-#: and 192 texels.
-GROUP = 16
 #: Lattice strides of the passes over a tile (see neighbour_passes): 1/16 of the texels start
 #: from the initialisation grid, the others from a fitted neighbour 1-2 texels away.
 STRIDES = (4, 2, 1)
@@ -62,36 +58,54 @@ def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, 
 def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:
     """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps.
 
-    With ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse
-    lattice of texels from the initialisation grid, every later one starts each texel from its
-    nearest fitted neighbour's result, without the grid (see the module docstring); those that
-    do not converge so are fitted again from the grid."""
-    from ..fitting.problem import Data, prepare_stack
-
-    from .reader import _texel_arrays
+    The tile's values are prepared once (``problem.prepare_values``: the directions and weights its
+    texels share held once, the values in the cache's float32) and every pass runs the fit driver on some
+    of its texels (``driver.solve``: no FitResult per texel, the maps need only these arrays). With
+    ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse lattice of texels
+    from the initialisation grid, every later one starts each texel from its nearest fitted neighbour's
+    result, without the grid (see the module docstring); those that do not converge so are fitted again
+    from the grid."""
+    from ..fitting.driver import solve
+    from ..fitting.problem import data_unit, in_unit, prepare_values
+    from ..grid import ubo_pairs
 
     values = btf.tile_values(t)  # (h, w, 6561, C) float32
     h, w = values.shape[:2]
-    data = prepare_stack(np.asarray(values, np.float64).reshape(h * w, *values.shape[2:]), *_texel_arrays(),
-                         name=f"{btf.name} tile {t}")
     n = h * w
+    wi, wo = ubo_pairs()
+    data = prepare_values(values.reshape(n, *values.shape[2:]), wi, wo, np.ones(len(wi)), name=f"{btf.name} tile {t}")
+    del values
+    space = options.space(mdl)
+    # The tile's unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
+    # reflectance's range); the maps in the BTF's.
+    unit = data_unit(mdl, options.loss, data)
+    data, space = in_unit(data, unit), space.in_unit(unit)
+    unscale = np.where(space.linear_mask(), unit, 1.0)
+
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
+
+    def fit(texels, starts=None):
+        res = solve(space, options, data, fits=texels, starts=starts, grid=starts is None, results=False)
+        return res.v, res.loss, res.code == 0, res.steps
+
     passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]
     for texels, sources in passes:
-        starts = None if sources[0] < 0 else flat[sources]
-        v, value, converged, steps = _fit_texels(Data(*(a[texels] for a in data)), mdl, options, starts)
+        v, value, converged, steps = fit(texels, None if sources[0] < 0 else flat[sources])
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
     # A texel started from a neighbour that did not converge (a neighbour of another material, in
     # a basin of its own) is fitted again from the grid; the lower loss is kept.
     again = np.flatnonzero(~out["converged"] & ~np.isin(np.arange(n), passes[0][0]))
     if len(again):
-        v, value, converged, steps = _fit_texels(Data(*(a[again] for a in data)), mdl, options)
+        v, value, converged, steps = fit(again)
         better = (converged & ~out["converged"][again]) | (value < out["loss"][again])
         keep = again[better]
         flat[keep] = v[better]
         out["loss"][keep], out["converged"][keep], out["steps"][keep] = value[better], converged[better], steps[better]
+    if unit != 1.0:
+        flat *= unscale
+        out["loss"] *= _loss_scale(options.loss, unit)
     out = {k: a.reshape(h, w) for k, a in out.items()}
     i = 0
     for p in mdl.params:
@@ -100,19 +114,7 @@ def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[st
     return out
 
 
-def _fit_texels(data, mdl, options, starts=None):
-    """The fit driver on a batch of texels' data (``driver.solve``: no FitResult per texel, fit_btf
-    keeps only these maps), from the grid, or from ``starts`` (n, P) alone. Returns flat params
-    (n, P), loss, converged, steps."""
-    from ..fitting.driver import solve
-    from ..fitting.problem import Data
-
-    # Padded (repeating the last texel) to a multiple of GROUP: the calls of every pass, edge tile
-    # and refit then share the few compiled shapes of full tiles' passes.
-    n = len(data[0])
-    pad = np.concatenate([np.arange(n), np.full(-n % GROUP, n - 1)])
-    res = solve(options.space(mdl), options, Data(*(a[pad] for a in data)), grid=starts is None, batch=True,
-                starts=None if starts is None else np.asarray(starts)[pad])
-    return res.v[:n], res.loss[:n], res.code[:n] == 0, res.steps[:n]
-
-
+def _loss_scale(loss: str, unit: float) -> float:
+    """The factor from a loss value in the solve's unit to the table's: the losses a unit only rescales
+    (``problem.data_unit``) are homogeneous in f, of degree 2 (l2, cosine_l2), 2/3 (cbrt) or 0 (relative)."""
+    return {"l2": unit**2, "cosine_l2": unit**2, "cbrt": unit ** (2.0 / 3.0)}.get(loss, 1.0)

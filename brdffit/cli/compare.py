@@ -69,7 +69,7 @@ def compare_command(source, models, solvers, losses, out, force) -> int:
     from .._files import atomic_dir, reserve
     from ..fitting.compare import compare
     from ..fitting.losses import check_loss
-    from ..fitting.program import check_solver
+    from ..fitting.stages import check_solver
 
     for option, given in (("--models", models), ("--solvers", solvers), ("--losses", losses)):
         if given and not _split(given):  # e.g. --models ",,": refuse rather than run everything

@@ -110,7 +110,7 @@ def _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items
     from .._files import atomic_dir, reserve
     from ..fitting import fit
     from ..fitting.losses import check_loss
-    from ..fitting.program import check_solver
+    from ..fitting.stages import check_solver
 
     check_loss(loss)
     check_solver(solver)

@@ -13,7 +13,7 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
 from .driver import fit_measurements, with_warning
-from .options import DEFAULT_CHUNK, FitOptions
+from .options import FitOptions
 from .problem import resolve_model
 from .result import FitResult
 
@@ -87,7 +87,7 @@ def fit(
     mdl = resolve_model(model, measurement.n_channels)
     starts = None if init is None else start_vector(init, mdl, options.space(mdl))[None, :]
     result, = fit_measurements([measurement], mdl, options, weights=weights, starts=starts, grid=init is None,
-                               note=progress or (lambda _message: None))
+                               check_given=init is not None, note=progress or (lambda _message: None))
     return with_warning(result, scene_note)
 
 
@@ -100,10 +100,10 @@ def fit_batch(
     max_steps: int = DEFAULT_MAX_STEPS,
     rtol: float = DEFAULT_RTOL,
     atol: float = DEFAULT_ATOL,
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int | None = None,
     multistart: int | None = None,
     progress: bool = False,
-    lanes: int = 1,
+    lanes: int | None = None,
     bounds=None,
     fixed=None,
     physical: bool = False,
@@ -137,7 +137,8 @@ def fit_batch(
     if not grid and starts is None:
         raise UsageError("fit_batch: grid=False needs starts")
     with progress_bar(f"fit_batch {mdl.name}", n, shown=progress) as bar:
-        return fit_measurements(measurements, mdl, options, starts=starts, grid=grid, batch=True, on_chunk=bar.advance)
+        return fit_measurements(measurements, mdl, options, starts=starts, grid=grid,
+                                progress=lambda fraction: bar.advance(fraction * n))
 
 
 #: Below this fraction of a scene's weight covered by the data, a scene-weighted fit says so.

@@ -18,7 +18,7 @@ from .api import fit
 from .losses import LOSSES, check_loss
 from .problem import evaluate, prepare
 from .result import FitResult
-from .program import check_solver
+from .stages import check_solver
 
 from .._fit_defaults import COMPARE_SOLVERS as DEFAULT_SOLVERS
 

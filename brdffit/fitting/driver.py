@@ -1,19 +1,24 @@
-"""The fit driver: every fit of brdffit runs here.
+"""The fit driver: every fit of brdffit runs here, as a batch (SPEC 5: a single fit is a batch of one).
 
-``brdffit.fit`` (one measurement), ``brdffit.fit_batch`` (many) and ``brdffit.fit_btf`` (the texels
-of a BTF, tile by tile) check their options into one :class:`~brdffit.fitting.options.FitOptions`
-and call :func:`solve` (arrays in, a :class:`Solved` record out: one row per fit, each with its
-status code) or :func:`fit_measurements` (measurements in, one ``FitResult`` per fit, built by one
-function). What runs:
+``brdffit.fit`` (one measurement), ``brdffit.fit_batch`` (many) and ``brdffit.fit_btf`` (the texels of a
+BTF, tile by tile) check their options into one :class:`~brdffit.fitting.options.FitOptions` and call
+:func:`solve` (arrays in, a :class:`Solved` record out: one row per fit, each with its status code) or
+:func:`fit_measurements` (measurements in, one ``FitResult`` per fit, built by one function). What
+:func:`solve` runs, the same for one fit and for a million:
 
-- ``scipy``: the start grid (``init.best_starts``) then scipy's least_squares per start, in Python;
-- one fit (``fit``): one compiled program (``program.fit_program``: grid, solve, metrics, J^T J),
-  then a lobe the solve switched off is tried again at every roughness (``init.reseed_points``);
-- a batch (``fit_batch``, ``fit_btf``): the same program mapped over the fits
-  (``batch.solve_batch``).
+1. starts: the variable-projection grid and any given starts, the best ``k`` of each fit
+   (``stages.start_stage``), or the given starts alone;
+2. the solves, one lane per start, in rounds (``lanes.solve_rounds``); the best lane of each fit;
+3. lobes the data do not see (switched off, or a needle between the samples: ``init.unseen_lobes``) tried
+   again at every roughness, scored on every sample; the fit keeps what lowers its loss;
+4. the finish (``stages.finish_stage``): the loss afresh where the solver's own is not exact, metrics and
+   J^T J where FitResults are made;
+5. the status tests: the solver's test, a result no worse than its start, a model that cannot reach the
+   data (every parameter on a bound, rel_rmse near 1), a given start that ends far above the default's.
 
-A table far from reflectance's range is solved in a unit of its own (``problem.data_unit``) and
-given back in the table's.
+``scipy`` runs in Python, one start after another (``solver_scipy``), after the same grid. A table far
+from reflectance's range is solved in a unit of its own (``problem.data_unit``, for the losses whose
+objective a unit only rescales) and given back in the table's.
 """
 
 from __future__ import annotations
@@ -28,16 +33,22 @@ import numpy as np
 from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
+from . import lanes as _lanes
+from .cache import compiled
 from .options import FitOptions
-from .problem import Data, Prepared, data_unit, in_unit, loss_values, prepare, resolve_model
+from .problem import Data, Prepared, data_unit, in_unit, loss_values, prepare, resolve_model, stack
 from .._fit_defaults import STATUS_TEXT
-from .program import compiled, program_args, run_fit
 from .result import FitResult
+from .solve import result_check
 from .space import ParameterSpace, fit_warnings, sample_spacing
 from .structure import gauss_newton_matrix
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
+#: A fit from a given start whose loss ends above this factor of the default start's is not converged.
+GIVEN_START_FACTOR = 1.1
+#: rel_rmse from which a fit with every parameter on a bound has not reached the data.
+UNREACHED_REL_RMSE = 0.5
 
 
 def _quiet(_message: str) -> None:
@@ -52,16 +63,17 @@ class Solved(NamedTuple):
     code: np.ndarray  # (n,) int: status code (``_fit_defaults.STATUS_TEXT``), 0 converged
     steps: np.ndarray  # (n,) int
     start: np.ndarray  # (n, P) the start the best solve came from
-    metrics: dict | None  # name -> (n,), or None (scipy: computed with the result)
+    metrics: dict | None  # name -> (n,), or None (not asked for; scipy: computed with the result)
     jtj: np.ndarray | None  # (n, P, P) in v's order, or None
     seconds: dict  # "compile", "run", "init": the whole call's
     starts: int  # candidates solved per fit
+    notes: dict  # fit index -> one sentence on its status (a model that cannot reach the data ...)
 
 
 def _in_canonical_order(space: ParameterSpace, v: np.ndarray, jtj: np.ndarray | None):
     """Fixed entries exactly at their values, lobes of one kind narrowest first (a swap of whole
     interchangeable lobes: f_r and the loss are unchanged; J^T J follows the swap)."""
-    v = np.stack([space.clip(row) for row in v])
+    v = np.where(space.free, np.clip(v, space.lo, space.hi), space.values)
     if not space.order:
         return v, jtj
     perms = np.stack([space.canonical_order(row) for row in v])
@@ -71,123 +83,254 @@ def _in_canonical_order(space: ParameterSpace, v: np.ndarray, jtj: np.ndarray | 
     return v, jtj
 
 
-def solve(space: ParameterSpace, options: FitOptions, data: Data, *, starts: np.ndarray | None = None,
-          grid: bool = True, batch: bool = False, note: Callable[[str], None] = _quiet, on_chunk=None) -> Solved:
-    """Fit every row of ``data`` (arrays with a leading fit axis (n, ...)) in ``space``. ``starts``:
-    (n, P) given starts, ranked beside the grid's points (``grid``), or the only ones; ``batch``: run
-    the batched program (``batch.solve_batch``; else n must be 1)."""
-    model, n = space.model, int(np.asarray(data.ref).shape[0])
+class _Run:
+    """One call of :func:`solve`: the space, the options, the data and the plan its stages share."""
+
+    def __init__(self, space: ParameterSpace, options: FitOptions, data: Data, note):
+        self.space, self.options, self.data, self.note = space, options, data, note
+        self.model = space.model
+        self.plan = _lanes.plan(options.chunk, options.lanes)
+        self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
+        self.anchor = space.clip(self.model.default_vector())
+        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0}
+
+    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
+        self.seconds["compile"] += compile_s
+        self.seconds["run"] += run_s
+        if init:
+            self.seconds["init"] += compile_s + run_s
+
+    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None):
+        """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
+        each fit's own: ``grids`` (n, G, m)) and the ``given`` (n, E, P), ranked on ``subset``'s rows."""
+        from .stages import start_stage
+
+        o = self.options
+        lo, hi, free = self.bounds
+        if grids is None:
+            points = _init.cached_grid(self.model, lo, hi, free, self.anchor)
+            lane_args = given
+        else:
+            points, lane_args = np.zeros((0, 0)), (grids, given)
+        if subset is None:
+            subset = _init.subset_rows(Data(*(a if a.ndim == r else a[0] for a, r in zip(self.data, (2, 2, 2, 2, 2, 1)))))
+        key = (self.model, o.loss, k, True, self.plan.lanes)
+        out, c_s, r_s = _lanes.run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
+                                         (points, lo, hi, free, self.anchor, subset), self.plan)
+        self._count(c_s, r_s, init=True)
+        return out[0]
+
+    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> _lanes.Rounds:
+        o = self.options
+        r = _lanes.solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+                                self.bounds, self.plan, progress=progress)
+        self._count(r.compile_s, r.run_s)
+        return r
+
+    def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
+        from .stages import finish_stage
+
+        key = (self.model, self.options.loss, metrics, jtj, self.plan.lanes)
+        out, c_s, r_s = _lanes.run_stage(("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (),
+                                         self.plan)
+        self._count(c_s, r_s)
+        return out
+
+
+def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
+    """The lane index (into n*k lanes, fit-major) of each fit's lowest finite loss."""
+    key = np.where(np.isfinite(loss), loss, np.inf).reshape(n, k)
+    return np.arange(n) * k + np.argmin(key, axis=1)
+
+
+def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.ndarray | None = None,
+          starts: np.ndarray | None = None, grid: bool = True, results: bool = True, check_given: bool = False,
+          note: Callable[[str], None] = _quiet, progress=None) -> Solved:
+    """Fit the fits ``fits`` (rows of the per-fit fields; default: all) of ``data`` (``Data``: ref and floor
+    with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;
+    the results' rows follow ``fits``. ``starts``: (len(fits), P) given starts, ranked beside the grid's
+    points (``grid``), or the only ones. ``results``: also every metric and J^T J (for FitResults; else the
+    loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
+    not converged when it ends far above that (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with
+    the share of the fits whose solves ended, as they end."""
+    model = space.model
+    fits = np.arange(int(np.shape(data.ref)[0])) if fits is None else np.asarray(fits)
+    n, P = len(fits), model.n_free
     k = options.starts(model)
     if options.solver == "scipy":
-        return _solve_scipy(space, options, data, starts, grid, k, note)
-    if batch:
-        from .batch import solve_batch
+        return _solve_scipy(space, options, data, fits, starts, grid, k, note)
+    run = _Run(space, options, data, note)
+    given = np.zeros((n, 0, P)) if starts is None else np.asarray(starts, np.float64).reshape(n, 1, P)
+    if grid:
+        grid_size = len(_init.cached_grid(model, *run.bounds, run.anchor))
+        k = max(1, min(k, grid_size + given.shape[1]))
+        candidates = run.starts(fits, given, k)
+    else:
+        k = 1
+        candidates = given
+    r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress)
+    best = _best_of(r.loss, n, k)
+    v, loss, code, steps = r.v[best], r.loss[best], r.code[best], r.steps[best].copy()
+    start, start_loss, jtj = candidates.reshape(n * k, P)[best], r.start_loss[best], r.jtj[best]
+    if k > 1:
+        steps = r.steps.reshape(n, k).sum(axis=1)
 
-        res = solve_batch(space, options, data, k=k, starts=starts, grid=grid, on_chunk=on_chunk)
-        v, jtj = _in_canonical_order(space, res["v"], res["jtj"])
-        return Solved(v, res["loss"], res["code"], res["steps"], res["start"], res["metrics"], jtj,
-                      {"compile": res["compile_s"], "run": res["run_s"], "init": 0.0}, k)
-    assert n == 1, "one fit at a time outside a batch"
-    one = Data(*(np.asarray(a)[0] for a in data))
-    given = np.zeros((0, model.n_free)) if starts is None else np.asarray(starts, np.float64).reshape(1, -1)
-    args = program_args(model, space, one, given, grid=grid)
-    k = min(k, len(args.grid_points) if grid else 1)
-    out, compile_s, run_s = run_fit(model, options.loss, options.solver, options.rtol, options.atol,
-                                    options.max_steps, k, args, grid=grid, note=note)
-    steps = int(out["steps"])
-    for lobe in _init.switched_off_lobes(space, np.asarray(out["v"])):
-        # A lobe the solve switched off: try it again at every roughness, scored on every sample
-        # (linear parameters solved at each, the fit itself one more candidate), and keep what
-        # lowers the loss.
-        note(f"re-seeding the lobe of {lobe[0]}: the fit switched it off")
-        again = args._replace(grid_points=_init.reseed_points(space, np.asarray(out["v"]), lobe),
-                              given=np.asarray(out["v"], np.float64)[None, :],
-                              subset=np.arange(one.ref.shape[0]))  # a narrow peak the subset missed counts
-        out2, c_s, r_s = run_fit(model, options.loss, options.solver, options.rtol, options.atol,
-                                 options.max_steps, 1, again, grid=True, note=note)
-        compile_s, run_s = compile_s + c_s, run_s + r_s
-        if float(out2["loss"]) < float(out["loss"]):
-            out, steps = out2, steps + int(out2["steps"])
-    row = {key: np.asarray(a)[None] for key, a in out.items() if key != "metrics"}
-    v, jtj = _in_canonical_order(space, row["v"], row["jtj"])
-    return Solved(v, row["loss"], row["code"], np.array([steps]), row["start"],
-                  {key: np.asarray(x)[None] for key, x in out["metrics"].items()}, jtj,
-                  {"compile": compile_s, "run": run_s, "init": 0.0}, k)
+    # Lobes the data do not see: tried again at every roughness (scored on every sample), kept where better.
+    spacing = sample_spacing(np.asarray(data.wo if np.ndim(data.wo) == 2 else data.wo[fits[0]]))
+    for lobe, flagged in _init.unseen_lobes(space, v, spacing).items():
+        which = np.flatnonzero(flagged)
+        note(f"re-seeding the lobe of {lobe[0]}: the data do not see it")
+        again = run.starts(fits[which], v[which][:, None, :], 1, grids=_init.reseed_grids(space, v[which], lobe),
+                           subset=np.arange(np.shape(data.ref)[-2]))
+        r2 = run.solve(again[:, 0], fits[which])
+        better = np.isfinite(r2.loss) & (r2.loss < loss[which])
+        idx = which[better]
+        v[idx], loss[idx], code[idx], jtj[idx] = r2.v[better], r2.loss[better], r2.code[better], r2.jtj[better]
+        steps[which] += r2.steps
+
+    notes = {}
+    metrics = None
+    if results or options.solver != "lm":
+        # The solver's claim checked on the loss evaluated afresh (lm's own loss is exact: it only ever
+        # moves to a point of lower loss, so a BTF's maps need no finish).
+        out = run.finish(v, fits, metrics=results, jtj=False)
+        ok, code = result_check(out["loss"], start_loss, v, code, out["floor"])
+        if not ok.all():  # a point worse than its start (or not finite) gives way to the start
+            bad = np.flatnonzero(~ok)
+            v[bad] = np.where(space.free, np.clip(start[bad], space.lo, space.hi), run.anchor)
+            again = run.finish(v[bad], fits[bad], metrics=results, jtj=True)
+            jtj[bad] = again.pop("jtj")
+            for key, value in again.items():
+                if isinstance(value, dict):
+                    for name in value:
+                        out[key][name][bad] = value[name]
+                else:
+                    out[key][bad] = value
+        loss = out["loss"]
+        metrics = out.get("metrics")
+    _unreached(run, fits, v, metrics, code, notes)
+    if check_given and starts is not None and not grid:
+        _far_from_default(run, fits, v, loss, code, notes)
+    v, jtj = _in_canonical_order(space, v, jtj)
+    return Solved(v, loss, code, steps, start, metrics, jtj, run.seconds, k, notes)
 
 
-def _solve_scipy(space: ParameterSpace, options: FitOptions, data: Data, starts, grid: bool, k: int, note) -> Solved:
-    """scipy's least_squares from the k best grid points (or the given start) of each fit, in Python."""
+def _unreached(run: _Run, fits: np.ndarray, v: np.ndarray, metrics: dict | None, code: np.ndarray, notes: dict) -> None:
+    """A fit with every free parameter on a bound that leaves rel_rmse near 1 has not reached the data: the
+    model cannot reach the data's level within its bounds (a table in another unit than a native model's
+    bounds allow). ``metrics``: every fit's, or None (then computed for the fits on their bounds)."""
+    space = run.space
+    if not space.free.any():
+        return
+    tol_lo = 1e-6 * np.maximum(np.abs(space.lo), 1.0)
+    tol_hi = 1e-6 * np.maximum(np.abs(space.hi), 1.0)
+    on = (np.abs(v - space.lo) <= tol_lo) | (np.abs(v - space.hi) <= tol_hi)
+    every = np.flatnonzero(np.all(on | ~space.free, axis=1))
+    if not len(every):
+        return
+    if metrics is None:
+        rel = run.finish(v[every], fits[every], metrics=True, jtj=False)["metrics"]["rel_rmse"]
+    else:
+        rel = np.asarray(metrics["rel_rmse"])[every]
+    for i, value in zip(every, rel):
+        if value >= UNREACHED_REL_RMSE:
+            code[i] = 5
+            notes[int(i)] = (f"every parameter ended on a bound with rel_rmse {float(value):.3g}: the model cannot "
+                             "reach the data's level within its bounds (is the table in another unit?)")
+
+
+def _far_from_default(run: _Run, fits: np.ndarray, v: np.ndarray, loss: np.ndarray, code: np.ndarray,
+                      notes: dict) -> None:
+    """A converged fit from a given start also solved from the default start: far above it, it is not
+    converged (its solver's test passed, but in a basin the default start leaves)."""
+    n, P = v.shape
+    check = np.flatnonzero(code == 0)
+    if not len(check):
+        return
+    ref = run.solve(run.starts(fits[check], np.zeros((len(check), 0, P)), 1)[:, 0], fits[check])
+    far = np.zeros(n, bool)
+    far[check] = np.isfinite(ref.loss) & (loss[check] > GIVEN_START_FACTOR * ref.loss + 1e-300)
+    default_loss = np.full(n, np.nan)
+    default_loss[check] = ref.loss
+    for i in np.flatnonzero(far):
+        code[i] = 6
+        notes[int(i)] = (f"the fit from the given start ended at loss {loss[i]:.6g}, {loss[i] / default_loss[i]:.3g} "
+                         f"times the default start's ({default_loss[i]:.6g}): start from the default (init=None)")
+
+
+def _solve_scipy(space: ParameterSpace, options: FitOptions, data: Data, fits: np.ndarray, starts, grid: bool, k: int,
+                 note) -> Solved:
+    """scipy's least_squares from the k best grid points (the start stage, as every fit's) or the given
+    start of each fit, in Python, one start after another."""
     from . import solver_scipy  # scipy: imported only when a scipy fit runs
+    from .stages import per_lane
 
-    model, n = space.model, int(np.asarray(data.ref).shape[0])
+    model, n, P = space.model, len(fits), space.model.n_free
     lo, hi, free = space.lo, space.hi, space.free
-    anchor = space.clip(model.default_vector())
+    run = _Run(space, options, data, note)
+    if grid:
+        k = max(1, min(k, len(_init.cached_grid(model, *run.bounds, run.anchor))))
+        candidates = run.starts(fits, np.zeros((n, 0, P)), k)
+    else:
+        candidates = np.asarray(starts, np.float64).reshape(n, 1, P)
     rows = {key: [] for key in ("v", "loss", "code", "steps", "start")}
-    seconds = {"compile": 0.0, "run": 0.0, "init": 0.0}
-    solved = 1
-    for row in range(n):
-        one = Data(*(np.asarray(a)[row] for a in data))
-        if grid:
-            candidates, _, c_s, r_s = _init.best_starts(model, options.loss, one, lo, hi, free, anchor, k=k, note=note)
-            seconds["compile"] += c_s
-            seconds["run"] += r_s
-            seconds["init"] += c_s + r_s
-        else:
-            candidates = space.clip(starts[row])[None, :]
-        solved = len(candidates)
+    lane = per_lane(data)
+    for i, row in enumerate(fits):
+        one = Data(*(np.asarray(a)[row] if m else np.asarray(a) for a, m in zip(data, lane)))
         best = None
-        for i, v0 in enumerate(candidates):
+        for v0 in candidates[i]:
+            v0 = space.clip(v0)
             v, value, code, steps, c_s, r_s = solver_scipy.solve_scipy(
                 model, options.loss, v0, one, lo, hi, free, rtol=options.rtol, atol=options.atol,
                 max_steps=options.max_steps, jac=options.scipy_jac)
-            seconds["compile"] += c_s
-            seconds["run"] += r_s
+            run._count(c_s, r_s)
             if best is None or value < best[1]:
                 best = (v, value, code, steps, v0)
         for key, x in zip(rows, best):
             rows[key].append(x)
     v, _ = _in_canonical_order(space, np.asarray(rows["v"], np.float64), None)
     return Solved(v, np.asarray(rows["loss"]), np.asarray(rows["code"]), np.asarray(rows["steps"]),
-                  np.asarray(rows["start"]), None, None, seconds, solved)
+                  np.asarray(rows["start"]), None, None, run.seconds, candidates.shape[1], {})
 
 
 def fit_measurements(measurements: Sequence[Measurement], model: str | Model, options: FitOptions, *,
-                     weights=None, starts=None, grid: bool = True, batch: bool = False,
-                     note: Callable[[str], None] = _quiet, on_chunk=None) -> list[FitResult]:
+                     weights=None, starts=None, grid: bool = True, check_given: bool = False,
+                     note: Callable[[str], None] = _quiet, progress=None) -> list[FitResult]:
     """Fit ``model`` to each measurement (same samples and channels) with ``options``; one FitResult
-    each. ``starts``: (n, P) flat vectors in the table's unit (already in the space), or None."""
+    each. ``starts``: (n, P) flat vectors in the table's unit (already in the space), or None;
+    ``check_given``: see :func:`solve`. ``progress(fraction)``: called as the solves finish."""
     preps = [prepare(m, weights) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
     space = options.space(mdl)
+    data = stack([p.data for p in preps])
     # The solve works in the table's unit (problem.data_unit: 1, or a power of ten for a table far from
-    # reflectance's range; one for a batch, whose bounds are shared); results come back in the table's.
-    unit = data_unit(mdl, *preps)
+    # reflectance's range under a loss that a unit only rescales; one for a batch, whose bounds are
+    # shared); results come back in the table's.
+    unit = data_unit(mdl, options.loss, data)
     unscale = np.where(space.linear_mask(), unit, 1.0)
-    solved = [in_unit(p, unit).data for p in preps]
-    data = Data(*(np.stack([np.asarray(d[i]) for d in solved]) for i in range(len(Data._fields))))
     given = None if starts is None else np.asarray(starts, np.float64) / unscale
-    k = options.starts(mdl)
     note("initialising: grid of starts" if grid else "initialising: the given start")
-    note(f"solving: {options.solver}, {k} start{'s' if k > 1 else ''}")
-    res = solve(space.in_unit(unit), options, data, starts=given, grid=grid, batch=batch, note=note,
-                on_chunk=on_chunk)
-    if not batch:
-        note(f"solved: {int(res.steps[0])} steps, loss {float(res.loss[0]):.6g}, {STATUS_TEXT[int(res.code[0])]}")
+    note(f"solving: {options.solver}, {options.starts(mdl) if grid else 1} start(s)")
+    res = solve(space.in_unit(unit), options, in_unit(data, unit), starts=given, grid=grid, results=True,
+                check_given=check_given, note=note, progress=progress)
     n = len(measurements)
-    seconds = res.seconds if not batch else {key: s / n for key, s in res.seconds.items()}
+    if n == 1:
+        note(f"solved: {int(res.steps[0])} steps, loss {float(res.loss[0]):.6g}, {STATUS_TEXT[int(res.code[0])]}")
+    seconds = {key: s / n for key, s in res.seconds.items()}
     record = {**options.record(), "starts": res.starts, "init": "grid" if grid else "given"}
-    if batch:
-        record.update(batch=True, chunk=min(options.chunk, n))
+    if n > 1:
+        record.update(batch=True)
     if unit != 1.0:
         record["data_unit"] = unit
     given_back = unit == 1.0 and res.metrics is not None  # else metrics, J^T J and loss afresh, in the table's unit
     # space.clip: fixed entries exactly at their values after the unit's round trip
-    return [fit_result(space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]), int(res.steps[i]),
-                       res.start[i] * unscale, seconds=seconds, options_record=record,
-                       value=float(res.loss[i]) if given_back else None,
-                       metrics={key: float(x[i]) for key, x in res.metrics.items()} if given_back else None,
-                       jtj=res.jtj[i] if given_back else None)
-            for i, (m, prep) in enumerate(zip(measurements, preps))]
+    results = [fit_result(space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]), int(res.steps[i]),
+                          res.start[i] * unscale, seconds=seconds, options_record=record,
+                          value=float(res.loss[i]) if given_back else None,
+                          metrics={key: float(x[i]) for key, x in res.metrics.items()} if given_back else None,
+                          jtj=res.jtj[i] if given_back else None)
+               for i, (m, prep) in enumerate(zip(measurements, preps))]
+    return [with_warning(r, res.notes.get(i)) for i, r in enumerate(results)]
 
 
 def fit_result(space: ParameterSpace, options: FitOptions, measurement: Measurement, prep: Prepared, v, code: int,

@@ -288,6 +288,27 @@ def subset_index(data: Data) -> np.ndarray | None:
     return np.sort(np.concatenate([used, unused[: GRID_SAMPLES - len(used)]]))
 
 
+def subset_rows(data: Data) -> np.ndarray:
+    """Rows the grid scores (:func:`subset_index`: drawn from the used samples), or all."""
+    idx = subset_index(data)
+    return np.arange(data[0].shape[-2]) if idx is None else idx
+
+
+def cached_grid(model: Model, lo, hi, free, anchor) -> np.ndarray:
+    """:func:`grid_for`, built once per model and space (read-only)."""
+    arrays = (np.asarray(lo, np.float64), np.asarray(hi, np.float64), np.asarray(free, bool),
+              np.asarray(anchor, np.float64))
+    return _cached_grid(model, *(a.tobytes() for a in arrays))
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
+    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
+    pts = grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
+    pts.flags.writeable = False
+    return pts
+
+
 def take_rows(data: Data, idx) -> Data:
     """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
@@ -313,45 +334,68 @@ def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: in
     return np.asarray(flats)[order], np.asarray(values)[order], compile_s, run_s
 
 
-# -- lobes a composite fit switched off ------------------------------------------------------------
+# -- lobes the data do not see --------------------------------------------------------------------
+#: A lobe whose full width at half maximum is below this fraction of the sample spacing is a needle:
+#: at most the exact mirror samples see it (a scale and a roughness that only trade against each
+#: other there), so its shape is not fitted but left where the solve fell.
+NEEDLE_FRACTION = 0.1
 
-def switched_off_lobes(space, v) -> list[tuple[str, ...]]:
-    """The lobes (``Model.lobes``: their parameter names) of a fit at ``v`` whose every scale (linear
-    parameter) is on its lower bound 0 while the lobe has free nonlinear parameters. Where a lobe is
-    off, its shape has no effect on the loss, so a solver stopped there never tried it (issue 28:
-    lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0, scipy 12 % lower; a
-    Lafortune mirror lobe started where the grid's rho was 0 stopped at rel_rmse 0.087)."""
+
+def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str, ...], np.ndarray]:
+    """lobe (``Model.lobes``: its parameter names) -> (n,) bool: the fits (rows of ``v`` (n, P)) whose lobe
+    the data do not see, among lobes with free nonlinear parameters: every scale (linear parameter) on its
+    lower bound 0 (the lobe is off, so its shape has no effect on the loss and a solver stopped there
+    never tried it: lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0), or a needle
+    (full width at half maximum below ``NEEDLE_FRACTION`` of the sample ``spacing``: a held-out yellow
+    paint's ggx fit ended at alpha 1.2e-4, ks 3.5e-5, where alpha 0.0148, ks 0.5 fits better and shows its
+    highlight)."""
+    from ..models import get
+
     m = space.model
+    v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
     slices = dict(m.slices())
     linear = {p.name: p.linear for p in m.params}
-    off = []
+    out = {}
     for lobe in m.lobes:
         scales = [slices[n] for n in lobe.params if linear[n]]
         shapes = [slices[n] for n in lobe.params if not linear[n]]
         if not scales or not any(space.free[s].any() for s in shapes):
             continue
-        if all(np.all((v[s] <= space.lo[s]) & (space.lo[s] == 0.0)) for s in scales):
-            off.append(tuple(lobe.params))
-    return off
+        off = np.ones(len(v), bool)
+        for s in scales:
+            off &= np.all((v[:, s] <= space.lo[s]) & (space.lo[s] == 0.0), axis=1)
+        needle = np.zeros(len(v), bool)
+        try:
+            kind = get(lobe.kind)
+        except KeyError:
+            kind = None
+        if spacing is not None and kind is not None and kind.halfwidth is not None and kind.lobes:
+            names = kind.lobes[0].params
+            width = np.vectorize(lambda *x: 2.0 * float(kind.halfwidth(dict(zip(names, x)))), otypes=[float])(
+                *(v[:, slices[q].start] for q in lobe.params))
+            needle = width < NEEDLE_FRACTION * spacing
+        if (off | needle).any():
+            out[tuple(lobe.params)] = off | needle
+    return out
 
 
-def reseed_points(space, v, lobe: tuple[str, ...]) -> np.ndarray:
-    """Grid points (G, nonlinear parameters) for :func:`vp_grid`: the fit at ``v`` with the nonlinear
-    parameters named in ``lobe`` moved over the default grid's axes (its roughness on POINTS_ROUGHNESS
-    values, the others on POINTS_OTHER); every linear parameter is solved again at each point."""
+def reseed_grids(space, v: np.ndarray, lobe: tuple[str, ...]) -> np.ndarray:
+    """Grid points (n, G, nonlinear parameters) for :func:`vp_grid`, one grid per fit (rows of ``v``
+    (n, P)): the fit with the nonlinear parameters named in ``lobe`` moved over the default grid's axes
+    (its roughness on POINTS_ROUGHNESS values, the others on POINTS_OTHER); the linear parameters are
+    solved again at each point."""
     m = space.model
+    v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
     slices = dict(m.slices())
-    base, axes = [], []
-    for p in (p for p in m.params if not p.linear):
+    nonlin = [p for p in m.params if not p.linear]
+    base = np.stack([v[:, slices[p.name]].mean(axis=1) for p in nonlin], axis=1) if nonlin else np.zeros((len(v), 0))
+    cols, axes = [], []
+    for j, p in enumerate(nonlin):
         s = slices[p.name]
-        base.append(float(np.mean(v[s])))
         if p.name in lobe and space.free[s].any():
-            i = s.start
-            axes.append((len(base) - 1, _axis(p, space.lo[i], space.hi[i], _points(p))))
-    points = []
-    for combo in itertools.product(*(values for _, values in axes)):
-        pt = np.asarray(base, dtype=np.float64)
-        for (j, _), value in zip(axes, combo):
-            pt[j] = value
-        points.append(pt)
-    return np.asarray(points, dtype=np.float64)
+            cols.append(j)
+            axes.append(_axis(p, space.lo[s.start], space.hi[s.start], _points(p)))
+    combos = np.asarray(list(itertools.product(*axes)), dtype=np.float64).reshape(-1, len(cols))
+    grids = np.repeat(base[:, None, :], len(combos), axis=1)
+    grids[:, :, cols] = combos[None]
+    return grids

@@ -29,6 +29,7 @@ table is a different (more ``cosine_l2``-like) problem for it; it still converge
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._fit_defaults import LOSSES  # noqa: F401 (re-exported)
@@ -42,6 +43,47 @@ def _cbrt(x, eps):
     # Odd and smooth: x (x^2 + eps^2)^(-1/3) = sign(x) |x|^(1/3) for |x| >> eps, with the finite
     # slope eps^(-2/3) at 0 (the plain cube root's slope there is infinite).
     return x * (x * x + eps**2) ** (-1.0 / 3.0)
+
+
+#: fdlibm's minimax coefficients for log(1 + s^2 ...) on |s| <= 0.1716 (e_log.c, Sun Microsystems 1993).
+_LG = (6.666666666666735130e-01, 3.999999999940941908e-01, 2.857142874366239149e-01, 2.222219843214978396e-01,
+       1.818357216161805012e-01, 1.531383769920937332e-01, 1.479819860511658591e-01)
+_LN2_HI, _LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
+
+
+@jax.custom_jvp
+def log1p(x):
+    """ln(1 + x) for x > -1, within 2 ulp: ``jnp.log1p``, but in float64 on a CPU fdlibm's algorithm
+    written out, which XLA vectorises (its own float64 log is a scalar call per element: 3.8 against
+    2.1 ns per value, measured here; the log loss's largest cost per step). The argument is reduced
+    with the exponent of 1 + x to m in [sqrt(1/2), sqrt(2)) (near 0: x itself, exact), then
+    ln(m) = 2 atanh(s), s = (m - 1)/(m + 1), by fdlibm's minimax polynomial in s^2. Its derivative
+    is 1/(1 + x) (the bit manipulation has none)."""
+    if x.dtype != jnp.float64 or jax.default_backend() != "cpu":
+        return jnp.log1p(x)
+    u = 1.0 + x
+    bits = jax.lax.bitcast_convert_type(u, jnp.int64)
+    e = (bits >> 52) - 1023
+    m = jax.lax.bitcast_convert_type((bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000, jnp.float64)  # [1, 2)
+    high = m > 1.4142135623730951
+    m = jnp.where(high, 0.5 * m, m)
+    e = jnp.where(high, e + 1, e)
+    near = (x > -0.2928932188134524) & (x < 0.41421356237309503)  # m - 1 would lose what 1 + x rounded
+    f = jnp.where(near, x, m - 1.0)
+    e = jnp.where(near, 0, e).astype(x.dtype)
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * (_LG[1] + w * (_LG[3] + w * _LG[5]))
+    t2 = z * (_LG[0] + w * (_LG[2] + w * (_LG[4] + w * _LG[6])))
+    half_f2 = 0.5 * f * f
+    return e * _LN2_HI + ((f - (half_f2 - s * (half_f2 + t2 + t1))) + e * _LN2_LO)
+
+
+@log1p.defjvp
+def _log1p_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return log1p(x), dx / (1.0 + x)
 
 
 def check_loss(loss: str) -> str:
@@ -63,7 +105,7 @@ def transform(loss: str, f, cos_i, floor):
     if loss == "cosine_l2":
         return f * cos_i
     if loss == "log":
-        return jnp.log1p(jnp.maximum(f * cos_i, -1.0 + 1e-12))
+        return log1p(jnp.maximum(f * cos_i, -1.0 + 1e-12))
     if loss == "cbrt":
         return _cbrt(f * cos_i, CBRT_EPS * floor)
     raise ValueError(loss)

@@ -18,11 +18,8 @@ from .._fit_defaults import (COMPOSITE_STARTS, DEFAULT_ATOL, DEFAULT_LOSS, DEFAU
 from ..errors import UsageError
 from ..models.base import Model
 from .losses import check_loss
-from .program import check_solver
 from .space import ParameterSpace, parameter_space
-
-#: Fits per compiled call of a batch (``batch.solve_batch``).
-DEFAULT_CHUNK = 256
+from .stages import check_solver
 
 
 def default_starts(model: Model) -> int:
@@ -53,9 +50,10 @@ class FitOptions:
     bounds: Mapping[str, tuple] | None = None
     fixed: Mapping[str, object] | None = None
     physical: bool = False
-    #: A batch's fits per compiled call, and fits vectorised together inside one (``batch``).
-    chunk: int = DEFAULT_CHUNK
-    lanes: int = 1
+    #: Solves per compiled call, and solves vectorised together inside one; None: chosen for the backend
+    #: (``lanes.plan``).
+    chunk: int | None = None
+    lanes: int | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: the checked values replace the given ones once, here
@@ -72,8 +70,12 @@ class FitOptions:
         set_(self, "atol", float(self.atol))
         if self.scipy_jac not in ("exact", "2-point", "3-point"):
             raise UsageError(f"scipy_jac must be 'exact', '2-point' or '3-point', not {self.scipy_jac!r}")
-        if int(self.chunk) < 1 or int(self.lanes) < 1:
-            raise UsageError("fit_batch: chunk and lanes must be at least 1")
+        for name in ("chunk", "lanes"):
+            value = getattr(self, name)
+            if value is not None:
+                if int(value) < 1:
+                    raise UsageError("fit_batch: chunk and lanes must be at least 1")
+                set_(self, name, int(value))
         set_(self, "physical", bool(self.physical))
 
     def batched(self, who: str) -> "FitOptions":

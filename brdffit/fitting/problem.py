@@ -121,9 +121,9 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     if n_used == 0:
         raise UsageError(f"{m.name}: no valid samples to fit (all have weight 0, non-finite values or lie below the horizon)")
     c = values.shape[1]
-    up = np.array([0.0, 0.0, 1.0])
-    wi = _rows_replaced(wi, mask, up)
-    wo = _rows_replaced(wo, mask, up)
+    # Directions are replaced only where they are unusable themselves (a sample left out for its value or
+    # weight keeps its direction): so the rows of tables that share directions stay equal (``stack``).
+    wi, wo = _usable_directions(wi, wo)
     ref = _rows_replaced(values, mask, 0.0)  # the mask holds finite rows only
     w = np.where(mask, w, 0.0)
     w_sum = w.sum()
@@ -142,31 +142,64 @@ def prepare(m: Measurement, weights=None) -> Prepared:
     return Prepared(data, n_used, int(len(mask) - n_used), reasons, c, mask)
 
 
-def prepare_stack(values, wi, wo, weights, name: str = "batch") -> Data:
-    """:func:`prepare` of n measurements that share their directions and weights (the texels of a
-    BTF), at once: ``values`` (n, N, C) -> a ``Data`` of NumPy arrays with a leading axis n, equal
-    to stacking ``prepare`` of each (tested), without a Measurement per texel."""
-    values = np.asarray(values, dtype=np.float64)
+def _usable_directions(wi: np.ndarray, wo: np.ndarray):
+    """``wi``, ``wo`` as float64 with the rows that no formula may see (not finite, below the horizon)
+    replaced by the normal (they have weight 0): no NaN can leak from them into a residual or gradient."""
+    ok = _rows_all(np.isfinite(wi)) & _rows_all(np.isfinite(wo)) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    up = np.array([0.0, 0.0, 1.0])
+    return _rows_replaced(wi, ok, up), _rows_replaced(wo, ok, up)
+
+
+#: Tables per block of :func:`prepare_values` (its float64 work arrays stay this small).
+_BLOCK = 256
+
+
+def prepare_values(values, wi, wo, weights, name: str = "batch") -> Data:
+    """:func:`prepare` of n tables that share their directions and weights (the texels of a BTF), at once:
+    ``values`` (n, N, C), kept in their own precision (a BTF's float32: the solve converts) -> the batch's
+    ``Data``: ``ref`` (n, N, C) and ``floor`` (n, C) per table; the directions, cosines and weights held once
+    (``sqrt_w`` per table only where some table leaves out a sample the others use). Equal to :func:`stack`
+    of ``prepare`` of each table (tested), without a Measurement per table."""
+    values = np.asarray(values)
     wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
     w0 = np.asarray(weights, dtype=np.float64)
     n, N, c = values.shape
-    shared = (w0 > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0)  # (N,)
-    mask = shared[None, :] & _rows_all(np.isfinite(values))  # (n, N)
-    n_used = mask.sum(axis=1)
-    if np.any(n_used == 0):
-        raise UsageError(f"{name}[{int(np.argmin(n_used))}]: no valid samples to fit (all have weight 0, "
-                         "non-finite values or lie below the horizon)")
-    up = np.array([0.0, 0.0, 1.0])
-    wi_s = _rows_replaced(np.broadcast_to(wi, (n, N, 3)), mask, up)
-    wo_s = _rows_replaced(np.broadcast_to(wo, (n, N, 3)), mask, up)
-    ref = _rows_replaced(values, mask, 0.0)  # the mask holds finite rows only
-    w = np.where(mask, w0[None, :], 0.0)
-    total = w.sum(axis=1, keepdims=True)
-    sqrt_w = np.sqrt(w / (total * c))[:, :, None]
-    cos_i = np.clip(wi_s[:, :, 2:3], 1e-7, 1.0)
-    mean_abs = np.einsum("kn,knc->kc", w, np.abs(ref)) / total  # as prepare (tested equal to the last bit)
-    floor = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
-    return Data(wi_s, wo_s, ref, sqrt_w, cos_i, floor)
+    shared = (w0 > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0) & _rows_all(np.isfinite(wi)) & _rows_all(np.isfinite(wo))
+    ref = np.array(values, dtype=values.dtype if values.dtype in (np.float32, np.float64) else np.float64)
+    masks, floors = np.empty((n, N), bool), np.empty((n, c))
+    for s in range(0, n, _BLOCK):  # blocks: the float64 work arrays stay small whatever n is
+        block = ref[s : s + _BLOCK]
+        mask = shared[None, :] & _rows_all(np.isfinite(block))
+        block[~mask] = 0.0  # the mask holds finite rows only
+        w = np.where(mask, w0[None, :], 0.0)
+        total = w.sum(axis=1, keepdims=True)
+        if np.any(total == 0):
+            raise UsageError(f"{name}[{s + int(np.argmin(total[:, 0]))}]: no valid samples to fit (all have weight 0, "
+                             "non-finite values or lie below the horizon)")
+        # as prepare (tested equal to the last bit: the same einsum loop)
+        mean_abs = np.einsum("kn,knc->kc", w, np.abs(block.astype(np.float64))) / total
+        floors[s : s + _BLOCK] = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
+        masks[s : s + _BLOCK] = mask
+    same = bool(np.all(masks == masks[:1]))
+    w = np.where(masks[:1] if same else masks, w0[None, :], 0.0)
+    sqrt_w = np.sqrt(w / (w.sum(axis=1, keepdims=True) * c))[..., None]
+    wi, wo = _usable_directions(wi, wo)
+    cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
+    return Data(wi, wo, ref, sqrt_w[0] if same else sqrt_w, cos_i, floors)
+
+
+def stack(parts) -> Data:
+    """One batch ``Data`` of several fits' (each from :func:`prepare`): ``ref`` and ``floor`` with a leading
+    fit axis; ``wi``, ``wo``, ``sqrt_w``, ``cos_i`` held once where every fit has the same (a batch of one:
+    always)."""
+    out = []
+    for i, field in enumerate(Data._fields):
+        rows = [np.asarray(p[i]) for p in parts]
+        if field in ("ref", "floor") or any(not np.array_equal(r, rows[0]) for r in rows[1:]):
+            out.append(np.stack(rows))
+        else:
+            out.append(rows[0])
+    return Data(*out)
 
 
 def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
@@ -252,22 +285,28 @@ def homogeneous(model: Model) -> bool:
     return bool(np.all(np.asarray(model.eval(zero, d[0], d[1])) == 0.0))
 
 
-def data_unit(model: Model, *preps: Prepared) -> float:
-    """1.0, or the power of ten in whose units the fit of ``model`` to ``preps`` works (see UNIT_RANGE;
-    several: one unit for a batch, from the mean over all their used samples)."""
-    parts = [np.abs(np.asarray(p.data[2])[p.used] * np.asarray(p.data[4])[p.used]).ravel() for p in preps]
-    values = np.concatenate(parts) if parts else np.zeros(0)
-    if not values.size:
+def data_unit(model: Model, loss: str, data: Data) -> float:
+    """1.0, or the power of ten in whose units the fit of ``model`` to the batch ``data`` works (see
+    UNIT_RANGE: one unit for a batch, from the mean over all its used samples). Only for a loss whose
+    objective a unit merely rescales: the ``log`` loss has a unit of its own (ln(1 + f cos)), so a
+    table in another unit is another problem for it, and it is solved as it is (a mirror table's few
+    samples at f ~ 1e5 moved such a fit into units of 1e4, where it minimised another objective than
+    the one it reported)."""
+    if loss == "log":
         return 1.0
-    mean = float(np.mean(values))
+    ref = np.abs(np.asarray(data.ref, np.float64) * np.asarray(data.cos_i))
+    used = np.broadcast_to(np.asarray(data.sqrt_w) > 0, ref.shape[:-1] + (1,))
+    total = int(np.count_nonzero(used)) * ref.shape[-1]
+    if not total:
+        return 1.0
+    mean = float(np.sum(np.where(used, ref, 0.0)) / total)
     if not (np.isfinite(mean) and mean > 0) or UNIT_RANGE[0] <= mean <= UNIT_RANGE[1] or not homogeneous(model):
         return 1.0
     return float(10.0 ** round(np.log10(mean / CANONICAL_MEAN)))
 
 
-def in_unit(prep: Prepared, unit: float) -> Prepared:
-    """``prep`` with its values (and the loss floors that follow them) divided by ``unit``."""
+def in_unit(data: Data, unit: float) -> Data:
+    """``data`` with its values (and the loss floors that follow them) divided by ``unit``."""
     if unit == 1.0:
-        return prep
-    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
-    return dataclasses.replace(prep, data=Data(wi, wo, np.asarray(ref) / unit, sqrt_w, cos_i, np.asarray(floor) / unit))
+        return data
+    return data._replace(ref=np.asarray(data.ref) / unit, floor=np.asarray(data.floor) / unit)

@@ -1,5 +1,5 @@
-"""Solving one fit's starts (SPEC 5): the constants a fit computes once, the solve of each start by
-its solver family, the best of them, and the check of its result.
+"""Solving one start (SPEC 5): the constants a fit computes once, the solve by its solver family, and
+the check of its result.
 
 Solver families, one per file: ``lm`` (the default, brdffit's bounded Levenberg-Marquardt:
 ``solver_lm``), optimistix's stock ``optx_lm`` / ``gauss_newton`` / ``dogleg`` / ``bfgs``
@@ -31,18 +31,6 @@ class FitConstants(NamedTuple):
     loss_floor: jax.Array  # () the loss of an exact fit (residuals at roundoff level)
 
 
-class BestSolve(NamedTuple):
-    """The best of a fit's solved starts (``solve_starts``), not yet checked (``result_check``)."""
-
-    v: jax.Array  # (P,) the solution
-    loss: jax.Array  # () its loss, by the solver's route
-    code: jax.Array  # () status code (``_fit_defaults.STATUS_TEXT``)
-    steps: jax.Array  # () the solver's steps
-    index: jax.Array  # () which start it came from
-    jtj: jax.Array  # (P, P) J^T J at v
-    start_loss: jax.Array  # () the loss at that start
-
-
 def fit_constants(model: Model, loss: str, data: Data) -> FitConstants:
     """What every step of a fit shares and computes once (jit-able): g(f_ref) of the loss
     (``losses.reference_transform``), the direction-only terms of a separable model
@@ -60,20 +48,23 @@ def fit_constants(model: Model, loss: str, data: Data) -> FitConstants:
 
 
 def result_check(value, l0, v, code, loss_floor):
-    """(ok, code): whether the solver's point v with loss ``value`` (evaluated afresh) may stand,
-    i.e. is finite and no worse than the start's loss l0 beyond roundoff, whatever the solver
-    claims; if not, a failure code (2: worse, 3: non-finite) unless the solver gave one. A point
-    at the exact-fit floor is converged."""
-    finite = jnp.all(jnp.isfinite(v)) & jnp.isfinite(value)
-    ok = finite & (value <= l0 * (1 + 1e-9) + loss_floor)
+    """(ok, code), NumPy, one entry per fit: whether the solver's point v (rows) with loss ``value``
+    (evaluated afresh) may stand, i.e. is finite and no worse than the start's loss l0 beyond
+    roundoff, whatever the solver claims; if not, a failure code (2: worse, 3: non-finite) unless the
+    solver gave one. A point at the exact-fit floor (``loss_floor``) is converged."""
+    import numpy as np
+
+    value, l0, code, loss_floor = (np.asarray(a) for a in (value, l0, code, loss_floor))
+    finite = np.all(np.isfinite(np.asarray(v)), axis=-1) & np.isfinite(value)
+    ok = finite & (np.where(finite, value, np.inf) <= l0 * (1 + 1e-9) + loss_floor)
     # Non-finite first: a NaN loss also fails the comparison, and must not read as "worse".
-    mine = jnp.where(finite, jnp.where(ok, 0, 2), 3)
-    code = jnp.where(code != 0, code, mine)
+    mine = np.where(finite, np.where(ok, 0, 2), 3)
+    code = np.where(code != 0, code, mine)
     # An exact fit (residuals at roundoff level) has converged, whatever the solver's own stopping
     # test said: optimistix's Gauss-Newton and BFGS test the change of every unknown, which an exact
-    # fit with a direction the data do not determine never settles (issue 28: blinn_phong and
-    # oren_nayar on their own noise-free data, rel_rmse 1e-15, "did not converge" after 200 steps).
-    code = jnp.where(finite & (value <= loss_floor), 0, code)
+    # fit with a direction the data do not determine never settles (blinn_phong and oren_nayar on
+    # their own noise-free data, rel_rmse 1e-15, "did not converge" after 200 steps).
+    code = np.where(finite & (np.where(finite, value, np.inf) <= loss_floor), 0, code)
     return ok, code
 
 
@@ -100,33 +91,11 @@ def make_solver(name: str, rtol: float, atol: float, normal_equations: Callable 
 
 
 def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """The jit-able solve of one start: run(v0 (P,), data, lo, hi, free, consts) -> (v, loss, code,
-    steps, J^T J at v, loss at v0); ``consts``: :func:`fit_constants` of the data. The caller
-    checks the result (:func:`result_check`, done by ``program.fit_program`` on the best start's
-    result, with the loss evaluated afresh for the metrics anyway)."""
+    """The jit-able solve of one start, at most ``max_steps`` steps. ``lm``: run(v0 (P,), data, lo, hi,
+    free, consts, resume=None) -> (v, Resume, done, code, steps) (``solver_lm.solve_lm``: it continues
+    from a previous round's ``resume``); a stock solver: run(v0, data, lo, hi, free, consts) -> the same,
+    its ``Resume`` holding the loss at v (``c``), at v0 (``c0``) and J^T J at v (``H``). ``consts``:
+    :func:`fit_constants` of the data. The caller checks the result (:func:`result_check`)."""
     if solver_name == "lm":
         return solve_lm(model, loss, rtol, atol, max_steps)
     return solve_stock(model, loss, solver_name, rtol, atol, max_steps, model_loss(model, loss))
-
-
-def solve_starts(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
-    """run(starts (K, P), data, lo, hi, free, consts) -> the best of K solves (one vmapped
-    solve), a :class:`BestSolve`.
-    ``consts``: as ``solve_one``; the result is not yet checked (:func:`result_check`).
-
-    The best is the lowest loss; the fit is converged when that solve's own test passed."""
-    single = solve_one(model, loss, solver_name, rtol, atol, max_steps)
-    batched = jax.vmap(single, in_axes=(0, None, None, None, None, None))
-
-    def run(starts, data, lo, hi, free, consts):
-        if starts.shape[0] == 1:
-            # One start (every single-lobe fit): no batch axis of length 1 in the loop.
-            out = single(starts[0], data, lo, hi, free, consts)
-            v, value, code, steps, jtj, l0 = jax.tree_util.tree_map(lambda a: a[None], out)
-        else:
-            v, value, code, steps, jtj, l0 = batched(starts, data, lo, hi, free, consts)
-        key = jnp.where(jnp.isfinite(value) & jnp.all(jnp.isfinite(v), axis=1), value, jnp.inf)
-        i = jnp.argmin(key)
-        return BestSolve(v[i], value[i], code[i], steps[i], i, jtj[i], l0[i])
-
-    return run

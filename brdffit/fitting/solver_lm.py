@@ -14,7 +14,7 @@ original.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import equinox as eqx
 import jax
@@ -104,6 +104,12 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return self.normal_equations(y, args)
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        resume = options.get("resume")
+        if resume is not None:
+            # A solve continued from a previous round's state (:class:`Resume`): exactly the iteration
+            # that one long solve would have run, with no evaluation at the start.
+            return _LMState(c=resume.c, c0=resume.c0, g=resume.g, H=resume.H, lam=resume.lam, nu=resume.nu,
+                            done=jnp.asarray(False), result=optx.RESULTS.successful)
         c, g, H = self._normal(fn, y, args)
         dtype = y.dtype
         return _LMState(c=c, c0=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
@@ -177,12 +183,29 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return state.done, state.result
 
     def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
-        return y, aux, {"loss": state.c, "loss0": state.c0, "jtj": state.H}
+        return y, aux, {"resume": Resume(state.c, state.c0, state.g, state.H, state.lam, state.nu), "done": state.done}
+
+
+class Resume(NamedTuple):
+    """What a solve continues from (``options["resume"]``): the last round's loss ``c``, the start's
+    loss ``c0``, the gradient and Gauss-Newton matrix at the point, and the damping ``lam``, ``nu``. A
+    fit is solved in rounds of a few steps (``stages``): between rounds the fits that are done leave
+    the batch, the others go on from here, as one long solve would."""
+
+    c: jax.Array
+    c0: jax.Array
+    g: jax.Array
+    H: jax.Array
+    lam: jax.Array
+    nu: jax.Array
 
 
 def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
-    """run(v0 (P,), data, lo, hi, free, consts) -> (v, loss, code, steps, J^T J at v, loss at v0) with
-    :class:`BoundedLevenbergMarquardt` on the model's structured normal equations."""
+    """run(v0 (P,), data, lo, hi, free, consts, resume=None) -> (v, Resume, done, code, steps) with
+    :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most
+    ``max_steps`` steps from v0, or from a previous round's ``resume`` (then v0 is that round's v).
+    ``Resume.c`` is the loss at v, ``Resume.H`` J^T J there, ``Resume.c0`` the loss at the first start;
+    ``done``: the solver's own test passed."""
     from .structure import normal_equations
 
     fn = flat_residual(model, loss)
@@ -190,14 +213,15 @@ def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
     # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
     solver = BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=lambda y, a: ne(y, *a))
 
-    def run(v0, data, lo, hi, free, consts):
+    def run(v0, data, lo, hi, free, consts, resume=None):
         v0 = jnp.clip(v0, lo, hi)
+        options = {"lower": lo, "upper": hi, "free": free, "loss_floor": consts.loss_floor}
+        if resume is not None:
+            options["resume"] = resume
         sol = optx.least_squares(lambda v, a: fn(v, a[0]), solver, v0, args=(data, consts.g_ref, consts.geometry),
-                                 options={"lower": lo, "upper": hi, "free": free, "loss_floor": consts.loss_floor},
-                                 max_steps=max_steps, throw=False)
+                                 options=options, max_steps=max_steps, throw=False)
         # The iterate moves only to accepted points (finite, lower loss): the final state's
         # loss and J^T J are those of sol.value, and the start's loss is in the state.
-        return (sol.value, sol.stats["loss"], status_code(sol.result), sol.stats["num_steps"],
-                sol.stats["jtj"], sol.stats["loss0"])
+        return sol.value, sol.stats["resume"], sol.stats["done"], status_code(sol.result), sol.stats["num_steps"]
 
     return run

@@ -67,8 +67,10 @@ COLUMN_NORM = 30.0
 
 
 def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, max_steps: int, loss_of):
-    """run(v0 (P,), data, lo, hi, free, consts) -> (v, loss, code, steps, J^T J at v, loss at v0) with
-    the stock solver ``name``; ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
+    """run(v0 (P,), data, lo, hi, free, consts) -> (v, Resume, done, code, steps) with the stock solver
+    ``name`` (``Resume``: the loss at v and at v0, J^T J at v; the damping entries 0: a stock solve does
+    not continue); ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
+    from .solver_lm import Resume
     from .structure import gauss_newton_matrix
 
     fn = flat_residual(model, loss)
@@ -97,7 +99,9 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
         sol = optx.least_squares(lambda z, d: fn_x(z / scale, d), solver, x0 * scale, args=data,
                                  max_steps=max_steps, throw=False)
         v = to_box(jnp.where(free, sol.value / scale, x0), lo, hi)
-        return v, loss_of(v, data, consts), status_code(sol.result), sol.stats["num_steps"], jtj(v, data), \
-            loss_of(v0, data, consts)
+        code = status_code(sol.result)
+        zero = jnp.zeros((), v.dtype)
+        state = Resume(loss_of(v, data, consts), loss_of(v0, data, consts), jnp.zeros_like(v), jtj(v, data), zero, zero)
+        return v, state, code == 0, code, sol.stats["num_steps"]
 
     return run

@@ -77,6 +77,14 @@ def _residual_and_slope(loss, f, data: Data, g_ref=None):
     return jax.jvp(lambda f: L.residual(loss, f, ref, cos_i, sqrt_w, floor, g_ref), (f,), (jnp.ones_like(f),))
 
 
+def _residual_and_slope_t(loss, f, data: Data, g_ref=None):
+    """:func:`_residual_and_slope` for f laid out (C, N): r and dr/df, both (C, N)."""
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    g_t = None if g_ref is None else g_ref.T
+    return jax.jvp(lambda f: L.residual(loss, f, ref.T, cos_i.T, sqrt_w.T, floor[:, None], g_t), (f,),
+                   (jnp.ones_like(f),))
+
+
 def basis_fn(model: Model):
     """For a :func:`separable` model: basis(theta (n_nl,), wi, wo) -> F (N, n_lin + 1), with
     theta the non-linear parameters in declared order; column j = B_0 + B_j (linear parameter j,
@@ -127,6 +135,8 @@ def normal_equations(model: Model, loss: str):
     basis = basis_fn(model)
     split = _split_vector(model)
 
+    pairs = [(a, b) for a in range(len(model.params)) for b in range(a, len(model.params))]
+
     def structured(v, data: Data, g_ref=None, geometry=None):
         wi, wo = data[0], data[1]
         theta, lam = split(v)
@@ -134,19 +144,35 @@ def normal_equations(model: Model, loss: str):
             F, dF = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)
         else:
             F, dF = basis_and_partials(basis, len(nonlin))(theta, wi, wo)
-        f, B = _from_basis(F, lam, n_lin)
-        r, slope = _residual_and_slope(loss, f, data, g_ref)
-        cols = [None] * len(model.params)
-        wT = slope.T  # (C, N)
+        # The sample axis last from here on, and two results materialised (optimization_barrier): the
+        # basis with its partials, and the residuals with their slopes. Left to itself XLA recomputed
+        # the lobe inside every later loop and built J through transposes and small matrix products
+        # (measured on ggx/UBO-81: 0.67 -> 0.36 ms per evaluation on this CPU).
+        Ft = F.T  # (n_lin + 1, N)
+        dFt = jnp.swapaxes(dF, 1, 2) if nonlin else None  # (n_nl, n_lin + 1, N)
+        Ft, dFt = jax.lax.optimization_barrier((Ft, dFt))
+        B, B0 = Ft[:n_lin] - Ft[n_lin:], Ft[n_lin]
+        f = B0[None] + sum(lam[j][:, None] * B[j][None] for j in range(n_lin))  # (C, N)
+        r, slope = _residual_and_slope_t(loss, f, data, g_ref)
+        r, slope = jax.lax.optimization_barrier((r, slope))
+        rows = [None] * len(model.params)
         for j, k in enumerate(lin):
-            cols[k] = wT * B[:, j][None, :]
+            rows[k] = slope * B[j][None]
         if nonlin:
-            dB0, dB = dF[:, :, n_lin], dF[:, :, :n_lin] - dF[:, :, n_lin:]
-            df = dB0[:, None, :] + jnp.einsum("knj,jc->kcn", dB, lam)  # (n_nl, C, N)
+            dB0, dB = dFt[:, n_lin], dFt[:, :n_lin] - dFt[:, n_lin:]
             for i, k in enumerate(nonlin):
-                cols[k] = wT * df[i]
-        J3 = jnp.stack(cols, axis=1)  # (C, K, N)
-        return _assemble(jnp.asarray(S, v.dtype), J3, r.T)
+                rows[k] = slope * (dB0[i][None] + sum(lam[j][:, None] * dB[i, j][None] for j in range(n_lin)))
+        # J^T J per channel from its distinct entries (a symmetric K x K block), each a sum over samples.
+        G = [jnp.sum(rows[a] * rows[b], axis=-1) for a, b in pairs]  # each (C,)
+        blocks = [[None] * len(rows) for _ in rows]
+        for (a, b), g in zip(pairs, G):
+            blocks[a][b] = blocks[b][a] = g
+        Gc = jnp.stack([jnp.stack(row) for row in blocks])  # (K, K, C)
+        gc = jnp.stack([jnp.sum(row * r, axis=-1) for row in rows])  # (K, C)
+        Sv = jnp.asarray(S, v.dtype)
+        H = jnp.einsum("ckp,klc,clq->pq", Sv, Gc, Sv)
+        g = jnp.einsum("ckp,kc->p", Sv, gc)
+        return jnp.sum(r * r), g, H
 
     return structured
 

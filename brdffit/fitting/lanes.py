@@ -1,0 +1,206 @@
+"""Running the fit stages (``stages``) over many lanes: chunks, devices, and the solver's rounds.
+
+A *lane* is one solve (one start of one fit). The driver hands :func:`run_stage` the lanes' own
+arguments, the batch's data (``Data``: per-fit fields with one row per fit, shared fields without) and
+the fit each lane belongs to; here the lanes are cut into chunks of a few compiled sizes, each chunk's
+rows of the per-fit fields are gathered, and the chunks run on the process's devices. No Python runs
+per fit: per chunk only.
+
+How a backend is used (:func:`plan`, unless the caller sets ``chunk`` and ``lanes``):
+
+- CPU: chunks of ``CPU_CHUNK`` lanes, ``CPU_LANES`` of them vectorised at a time inside the compiled
+  call (a vectorised solve gains little on a CPU beyond sharing each operation's overhead, and its
+  arrays must stay in the cache), as many chunks at once as the machine has cores (XLA runs a call
+  without the GIL).
+- GPU (and other accelerators): one call holds up to ``DEVICE_CHUNK`` lanes, all vectorised; the
+  lane axis is split over the process's devices.
+
+Solver rounds (:func:`solve_rounds`): a vectorised solve runs every lane until its slowest is done, so
+the solver runs at most ``ROUND_STEPS`` steps per call; between calls the lanes that are done leave
+and the others continue from their state (``solver_lm.Resume``) exactly where they were.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from .cache import compiled
+from .problem import Data
+
+#: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring).
+CPU_CHUNK = 64
+CPU_LANES = 4
+#: Lanes per compiled call on an accelerator, all vectorised.
+DEVICE_CHUNK = 16384
+#: Solver steps per round (see :func:`solve_rounds`).
+ROUND_STEPS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """How lanes run: ``chunk`` lanes per compiled call (a multiple of ``lanes``), ``lanes`` vectorised
+    together inside it, ``workers`` calls at once, on ``devices`` (the lane axis split over them)."""
+
+    chunk: int
+    lanes: int
+    workers: int
+    devices: tuple
+
+    def sizes(self, n: int) -> list[tuple[int, int]]:
+        """(lanes, compiled size) of each call for n lanes: full chunks, then the rest padded to the
+        next power of two (a multiple of the device count), so that few shapes are compiled."""
+        out = [(self.chunk, self.chunk)] * (n // self.chunk)
+        rest = n % self.chunk
+        if rest:
+            size = len(self.devices)
+            while size < rest:
+                size *= 2
+            out.append((rest, min(size, self.chunk)))
+        return out
+
+
+def plan(chunk: int | None = None, lanes: int | None = None) -> Plan:
+    """The :class:`Plan` for this process's devices (``chunk`` / ``lanes`` override the backend's)."""
+    devices = tuple(jax.local_devices())  # under jax.distributed, this process's own
+    if devices[0].platform == "cpu":
+        lanes = lanes or CPU_LANES
+        chunk = chunk or CPU_CHUNK
+        workers = max(1, min(os.cpu_count() or 1, 8))
+        devices = devices[:1]  # several host "devices" share the same cores: threads use them
+    else:
+        chunk = chunk or DEVICE_CHUNK
+        lanes = lanes or chunk
+        workers = 1
+    unit = lanes * len(devices)
+    chunk = max(unit, -(-chunk // unit) * unit)
+    return Plan(chunk=chunk, lanes=lanes, workers=workers, devices=devices)
+
+
+def _rows(a, idx):
+    return a[idx] if isinstance(a, np.ndarray) else jax.numpy.take(a, idx, axis=0)
+
+
+def _place(tree, devices):
+    """The lane axis of every array split over ``devices`` (one device: as it is)."""
+    if len(devices) == 1:
+        return tree
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    mesh = Mesh(np.asarray(devices), ("lanes",))
+    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec("lanes")))
+
+
+def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared: tuple, p: Plan, *,
+              on_chunk=None) -> tuple[dict, float, float]:
+    """``build()(lane_args, data, *shared)`` (a stage of ``stages``) for every lane: ``lane_args`` a pytree
+    of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
+    lane reads. Returns (the outputs as NumPy with the lane axis first, compile seconds, run seconds).
+    ``on_chunk(lanes)`` is called after each call."""
+    from .stages import per_lane
+
+    fits = np.asarray(fits)
+    n = len(fits)
+    mask = per_lane(data)
+    leaves = jax.tree_util.tree_leaves(lane_args)
+    assert all(len(a) == n for a in leaves), "one row of lane_args per lane"
+    calls, start = [], 0
+    for count, size in p.sizes(n):
+        idx = np.arange(start, start + count)
+        calls.append((idx, np.concatenate([idx, np.full(size - count, idx[0])])))
+        start += count
+
+    def call_args(padded):
+        rows = fits[padded]
+        chunk_data = Data(*(_rows(a, rows) if m else a for a, m in zip(data, mask)))
+        lane = jax.tree_util.tree_map(lambda a: _rows(a, padded), lane_args)
+        placed = _place((lane, Data(*(a if m else None for a, m in zip(chunk_data, mask)))), p.devices)
+        return (placed[0], Data(*(b if m else a for a, b, m in zip(chunk_data, placed[1], mask))), *shared)
+
+    compile_s = 0.0
+    programs = {}
+    for _, padded in calls:  # compile (or load) each size once, before the calls run on threads
+        size = len(padded)
+        if size not in programs:
+            programs[size], c_s = compiled(key, build, *call_args(padded))
+            compile_s += c_s
+
+    def run(call):
+        idx, padded = call
+        out = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], programs[len(padded)](*call_args(padded)))
+        if on_chunk is not None:
+            on_chunk(len(idx))
+        return out
+
+    t0 = time.perf_counter()
+    if p.workers == 1 or len(calls) == 1:
+        outs = [run(c) for c in calls]
+    else:
+        with ThreadPoolExecutor(min(p.workers, len(calls))) as pool:
+            outs = list(pool.map(run, calls))
+    result = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
+    return result, compile_s, time.perf_counter() - t0
+
+
+class Rounds(NamedTuple):
+    """Every lane's solve after :func:`solve_rounds` (NumPy, the lane axis first)."""
+
+    v: np.ndarray  # (L, P) the solution
+    loss: np.ndarray  # (L,) the loss at v (the solver's route)
+    start_loss: np.ndarray  # (L,) the loss at the lane's start
+    jtj: np.ndarray  # (L, P, P) J^T J at v
+    code: np.ndarray  # (L,) status code
+    steps: np.ndarray  # (L,)
+    compile_s: float
+    run_s: float
+
+
+def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
+                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None) -> Rounds:
+    """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
+    at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
+    ``bounds``: (lo, hi, free). A stock optimistix solver runs all its steps in one round.
+    ``progress(fraction)``: called after each round with the share of the lanes that ended in it."""
+    from .stages import RESUMABLE, round_stage
+
+    n = len(v0)
+    v = np.array(v0, dtype=np.float64)
+    out = {"code": np.zeros(n, int), "steps": np.zeros(n, int)}
+    state = None
+    active = np.arange(n)
+    compile_s = run_s = 0.0
+    taken = 0
+    first = True
+    while len(active):
+        resumable = solver in RESUMABLE
+        # Few lanes left (or one fit): no chunk to empty, so the rest of the steps in one call.
+        steps = max_steps - taken if not resumable or len(active) <= p.lanes else min(ROUND_STEPS, max_steps - taken)
+        build_args = (model, loss, solver, rtol, atol, steps, first, p.lanes)
+        lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
+        res, c_s, r_s = run_stage(("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
+                                  fits[active], bounds, p)
+        compile_s, run_s = compile_s + c_s, run_s + r_s
+        v_new, resume, done, code, took = res
+        if state is None:
+            state = jax.tree_util.tree_map(lambda a: np.zeros((n, *a.shape[1:]), a.dtype), resume)
+        for whole, part in zip(state, resume):
+            whole[active] = part
+        v[active] = v_new
+        out["steps"][active] += took
+        taken += steps
+        # A lane not done after its round's steps reports "maximum number of steps" (code 1): it goes
+        # on while the fit's own budget lasts; any other code ends it.
+        out["code"][active] = code
+        going = ~done & (code == 1) & (taken < max_steps)
+        first = False
+        ended = len(active) - (int(going.sum()) if resumable else 0)
+        active = active[going] if resumable else active[:0]
+        if progress is not None and ended:
+            progress(ended / n)
+    return Rounds(v, state.c, state.c0, state.H, out["code"], out["steps"], compile_s, run_s)
