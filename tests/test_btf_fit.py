@@ -70,16 +70,17 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
     btf = brdffit.load_btf(small_lambert, tile=2)
     assert btf.n_tiles == 4
     fresh = brdffit.fit_btf(btf, "lambert", progress=False)
-    real = btf_tile.fit_tile
+    monkeypatch.setitem(btf_tile.GROUP_TEXELS, "cpu", 4)  # a group of one tile: the unit of a resume
+    real = btf_tile.fit_tiles
     calls = []
 
-    def interrupted(b, t, *args):
+    def interrupted(b, tiles, *args, **kwargs):
         if len(calls) == 2:
             raise KeyboardInterrupt
-        calls.append(t)
-        return real(b, t, *args)
+        calls.extend(tiles)
+        return real(b, tiles, *args, **kwargs)
 
-    monkeypatch.setattr(btf_tile, "fit_tile", interrupted)
+    monkeypatch.setattr(btf_tile, "fit_tiles", interrupted)
     out = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
         brdffit.fit_btf(btf, "lambert", out=out, progress=False)
@@ -87,11 +88,11 @@ def test_resume_after_interrupt(small_lambert, tmp_path, monkeypatch):
     assert not (out / "params.exr").exists()
     calls.clear()
 
-    def counted(b, t, *args):
-        calls.append(t)
-        return real(b, t, *args)
+    def counted(b, tiles, *args, **kwargs):
+        calls.extend(tiles)
+        return real(b, tiles, *args, **kwargs)
 
-    monkeypatch.setattr(btf_tile, "fit_tile", counted)
+    monkeypatch.setattr(btf_tile, "fit_tiles", counted)
     maps = brdffit.fit_btf(btf, "lambert", out=out, progress=False)
     assert calls == [2, 3]  # only the missing tiles
     assert maps.info["resumed_tiles"] == 2

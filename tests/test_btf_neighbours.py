@@ -58,8 +58,8 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     calls = []
     real = btf_tile._fit_texels
 
-    def recorded(data, mdl, options, starts=None):
-        out = real(data, mdl, options, starts)
+    def recorded(run, texels, starts=None):
+        out = real(run, texels, starts)
         calls.append((None if starts is None else np.array(starts), out[0]))
         return out
 
@@ -98,8 +98,8 @@ def test_texels_not_converged_from_a_neighbour_are_fitted_again_from_the_grid(sm
     calls = []
     real = btf_tile._fit_texels
 
-    def failing(data, mdl, options, starts=None):
-        v, value, converged, steps = real(data, mdl, options, starts)
+    def failing(run, texels, starts=None):
+        v, value, converged, steps = real(run, texels, starts)
         if starts is not None:  # as if every neighbour start had failed, at a higher loss
             value, converged = value * 2, np.zeros_like(converged)
         calls.append((starts is None, len(value)))
@@ -120,8 +120,8 @@ def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
     real = btf_tile._fit_texels
     calls = []
 
-    def failing(data, mdl, options, starts=None):
-        v, value, converged, steps = real(data, mdl, options, starts)
+    def failing(run, texels, starts=None):
+        v, value, converged, steps = real(run, texels, starts)
         calls.append(starts is None)
         if starts is not None:  # neighbour starts: not converged, loss x2
             value, converged = value * 2, np.zeros_like(converged)

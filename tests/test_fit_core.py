@@ -356,7 +356,7 @@ def test_result_check_codes():
     """The check of the solver's point: 0 when finite and no worse than the start; 2 when worse;
     3 when the loss or the point is not finite (a NaN loss also fails "no worse", and must not be
     reported as a divergence); a failure code the solver gave is kept."""
-    from brdffit.fitting.solve import result_check
+    from brdffit.fitting.driver import result_check
 
     v = jnp.array([0.5, 2.0])
     cases = [((0.5, 1.0, v, 0), (True, 0)), ((2.0, 1.0, v, 0), (False, 2)),

@@ -1,4 +1,4 @@
-"""Hostile inputs (issue 28): infinite weights are refused with one line, non-unit directions are
+"""Hostile inputs : infinite weights are refused with one line, non-unit directions are
 normalised, a metric that cannot be computed says so."""
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def test_metrics_of_images_without_numbers_are_not_a_perfect_match():
 
 
 def test_at_bound_does_not_depend_on_the_unit_of_the_data():
-    """kd recovered exactly at 2e-13 in data scaled by 1e-12 is not 'on its lower bound 0' (issue 28);
+    """kd recovered exactly at 2e-13 in data scaled by 1e-12 is not 'on its lower bound 0' ;
     a kd that is really 0 still is, whatever the scale."""
     m = ggx_measurement()
     for kd, expected in ((0.2, {}), (0.0, {"kd": "lower"})):
@@ -108,7 +108,7 @@ def test_a_scene_beyond_the_data_is_reported():
     assert half.coverage(m) == pytest.approx(0.5)
 
 
-# -- a table in another unit (issue 28) -----------------------------------------------------------------
+# -- a table in another unit -----------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def sample():
@@ -119,14 +119,14 @@ def sample():
 
 @pytest.mark.parametrize("solver", ["lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy"])
 def test_a_fit_does_not_depend_on_the_unit_of_the_data(sample, solver):
-    """The bundled sample scaled by 1e-12 and by 1e12 (a radiometric unit change) fits as the original,
-    with every solver: the same status, rel_rmse, and parameters (the scales times the factor). Before,
-    the default lm stopped "converged" at rel_rmse 0.95 at x1e12 (0.16 unscaled) and scipy at 2213 at
-    x1e-12: the log loss has a unit (ln(1 + f cos)), and the solvers saw numbers far from one."""
+    """The bundled sample scaled by 1e-12 and by 1e12 (a radiometric unit change), under a loss whose
+    objective a unit only rescales (cosine_l2), fits as the original with every solver: the same status,
+    rel_rmse, and parameters (the scales times the factor): it is solved in units of a power of ten
+    (``problem.data_unit``), which leaves its objective as it is up to a factor."""
     fits = {}
     for s in (1.0, 1e-12, 1e12):
         m = brdffit.Measurement(sample.wi, sample.wo, np.asarray(sample.values) * s, grid="ubo81", name=f"x{s:g}")
-        fits[s] = brdffit.fit(m, "ggx", solver=solver)
+        fits[s] = brdffit.fit(m, "ggx", solver=solver, loss="cosine_l2")
     base = fits[1.0]
     for s in (1e-12, 1e12):
         r = fits[s]
@@ -139,26 +139,28 @@ def test_a_fit_does_not_depend_on_the_unit_of_the_data(sample, solver):
             np.testing.assert_allclose(r.params[name], base.params[name], rtol=1e-5, atol=1e-9)
 
 
-def test_a_table_in_reflectance_s_range_is_fitted_as_it_is():
-    """The unit is changed only far from reflectance's range (1e-3..1e2 mean f cos): SPEC 5's log loss
-    as defined for every real table, and for models whose f is not proportional to their linear
-    parameters (a native model's fixed Fresnel term) never."""
-    from brdffit.fitting.problem import data_unit, homogeneous, prepare
+@pytest.mark.parametrize("solver", ["lm", "optx_lm", "gauss_newton", "dogleg", "bfgs", "scipy"])
+def test_the_log_loss_of_a_table_in_any_unit_is_the_plain_one(sample, solver):
+    """The log loss has a unit of its own (ln(1 + f cos)): a table x1e12 or x1e-12 is another problem for it,
+    and it is solved as that problem, in the table's unit (a unit of the fit's own once changed the objective:
+    a mirror table's lambert fit minimised another loss than it reported). Every solver either reaches the
+    plain loss's optimum (8 starts of lm) or says it did not converge: before, scipy stopped "converged" at
+    x1e-12 at 1e7 times the optimum's loss and bfgs at 3 times."""
+    from brdffit.fitting import problem
 
-    m = ggx_measurement()
-    assert data_unit(brdffit.models.get("ggx"), prepare(m)) == 1.0
-    scaled = brdffit.Measurement(m.wi, m.wo, np.asarray(m.values) * 1e9, grid="ubo81")
-    unit = data_unit(brdffit.models.get("ggx"), prepare(scaled))
-    assert np.log10(unit) == round(np.log10(unit))  # a power of ten: the scaled values stay exact
-    mean = np.mean(np.abs(np.asarray(scaled.values) * np.asarray(scaled.wi)[:, 2:3]))
-    assert 0.1 / np.sqrt(10) <= mean / unit <= 0.1 * np.sqrt(10)
-    assert homogeneous(brdffit.models.get("lambert+ggx+ggx")) and homogeneous(brdffit.models.get("lafortune"))
-    assert not homogeneous(brdffit.models.get("mitsuba:principled"))  # its dielectric lobe has no scale
-    assert not homogeneous(brdffit.models.get("mitsuba:roughconductor"))  # no linear parameter
-    assert data_unit(brdffit.models.get("mitsuba:principled"), prepare(scaled)) == 1.0
+    for s in (1e-12, 1e12):
+        m = brdffit.Measurement(sample.wi, sample.wo, np.asarray(sample.values) * s, grid="ubo81", name=f"x{s:g}")
+        best = brdffit.fit(m, "ggx", multistart=7)
+        r = brdffit.fit(m, "ggx", solver=solver)
+        assert "data_unit" not in r.options
+        plain = problem.evaluate(r.model, r.params, problem.prepare(m).data)["log"]
+        assert r.loss_value == pytest.approx(plain, rel=1e-9)
+        assert not r.converged or r.loss_value <= best.loss_value * (1 + 1e-6), (s, r.loss_value / best.loss_value)
+        if solver in ("lm", "scipy"):  # the default and the reference reach it; optimistix's stock solvers may
+            assert r.converged, (s, r.status)  # run out of steps at an optimum on a bound (f0 = 1): said, not claimed
 
 
-# -- a composite never worse than its parts (issue 28) ------------------------------------------------
+# -- a composite never worse than its parts  ------------------------------------------------
 
 @pytest.mark.slow
 def test_a_composite_is_not_left_with_a_lobe_switched_off(shared_data):
@@ -174,19 +176,25 @@ def test_a_composite_is_not_left_with_a_lobe_switched_off(shared_data):
         assert composite.converged and composite.loss_value <= 1.001 * best, (path.name, composite.loss_value / best)
 
 
-def test_switched_off_lobes_are_found_and_reseeded():
-    """The detection and the re-seeding grid on their own: a lobe whose every scale is 0 is off (not
-    one with a channel on, not the lambert term, which has no shape to try)."""
+def test_unseen_lobes_are_found_and_reseeded():
+    """The detection and the re-seeding grid on their own: a lobe whose every scale is 0 is off (not one with
+    a channel on, not the lambert term, which has no shape to try); a needle lobe (full width below a tenth
+    of the samples' spacing) is not seen either; one re-seeding grid per fit."""
     from brdffit.fitting import init
     from brdffit.fitting.space import parameter_space
 
     space = parameter_space(brdffit.models.get("lambert+ggx+ggx"))
     p = {"kd": [0.0, 0.0, 0.0], "ggx1.ks": [0.0, 0.0, 0.0], "ggx1.alpha": 0.1, "ggx1.f0": 0.04,
          "ggx2.ks": [0.5, 0.0, 0.0], "ggx2.alpha": 0.3, "ggx2.f0": 0.1}
-    v = np.asarray(space.model.flatten(space.model.check_params(p)))
-    assert init.switched_off_lobes(space, v) == [("ggx1.ks", "ggx1.alpha", "ggx1.f0")]
-    pts = init.reseed_points(space, v, ("ggx1.ks", "ggx1.alpha", "ggx1.f0"))  # columns: ggx1.alpha, ggx1.f0, ggx2.alpha, ggx2.f0
-    assert pts.shape == (init.POINTS_ROUGHNESS * init.POINTS_OTHER, 4)
+    needle = {**p, "ggx1.ks": [0.5] * 3, "ggx1.alpha": 1.2e-4}
+    v = np.stack([np.asarray(space.model.flatten(space.model.check_params(q))) for q in (p, needle)])
+    lobe = ("ggx1.ks", "ggx1.alpha", "ggx1.f0")
+    found = init.unseen_lobes(space, v, np.radians(14.5))
+    assert list(found) == [lobe] and found[lobe].tolist() == [True, True]
+    assert init.unseen_lobes(space, v, None)[lobe].tolist() == [True, False]  # a needle needs a spacing
+    grids = init.reseed_grids(space, v, lobe)  # columns: ggx1.alpha, ggx1.f0, ggx2.alpha, ggx2.f0
+    assert grids.shape == (2, init.POINTS_ROUGHNESS * init.POINTS_OTHER, 4)
+    pts = grids[0]
     assert len(set(pts[:, 0])) == init.POINTS_ROUGHNESS and len(set(pts[:, 1])) == init.POINTS_OTHER
     assert np.all(pts[:, 2] == 0.3) and np.all(pts[:, 3] == 0.1)
 
@@ -263,14 +271,14 @@ def test_lafortune3_fits_the_bundled_sample(sample):
 
 
 def test_fit_batch_does_not_depend_on_the_unit_of_the_data(sample):
-    """fit_batch fits a batch in one unit (the bounds are shared): the sample and a noisier copy,
-    both x1e12, fit as the originals times the factor."""
+    """fit_batch: the sample and a noisier copy, both x1e12, fit as the originals times the factor under a
+    loss a unit only rescales."""
     noisy = np.asarray(sample.values) * (1 + 0.05 * np.random.default_rng(1).standard_normal(np.shape(sample.values)))
     tables = [np.asarray(sample.values), noisy]
     runs = {}
     for s in (1.0, 1e12):
         ms = [brdffit.Measurement(sample.wi, sample.wo, t * s, grid="ubo81", name=f"x{s:g}") for t in tables]
-        runs[s] = brdffit.fit_batch(ms, "ggx")
+        runs[s] = brdffit.fit_batch(ms, "ggx", loss="cosine_l2")
     for base, scaled in zip(runs[1.0], runs[1e12]):
         assert scaled.status == base.status and scaled.options.get("data_unit") == 1e12
         assert scaled.metrics["rel_rmse"] == pytest.approx(base.metrics["rel_rmse"], rel=1e-6)

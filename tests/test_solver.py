@@ -16,7 +16,6 @@ import brdffit
 from brdffit import models
 from brdffit.fitting import fit, init
 from brdffit.fitting.problem import prepare, resolve_model
-from brdffit.fitting.program import run_fit, subset_rows
 from brdffit.fitting.solve import make_solver
 from brdffit.fitting.solver_lm import BoundedLevenbergMarquardt
 from brdffit.fitting.solver_optx import from_box, to_box
@@ -39,13 +38,21 @@ def _measurement(params=TRUTH, n=500, seed=0, scale=1.0, noise=0.01):
 
 
 def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
+    """The fit driver from ``start`` alone in the box lo, hi with ``free`` (held entries at ``start``)."""
+    import dataclasses
+
+    from brdffit.fitting.driver import solve
+    from brdffit.fitting.options import FitOptions
+    from brdffit.fitting.problem import stack
+
     prep = prepare(meas)
-    mdl = resolve_model("ggx", 3)
+    options = FitOptions(loss=loss, solver=solver, rtol=1e-9, max_steps=200)
     start = np.asarray(start, float)
-    args = (np.zeros((0, 0)), start[None, :], prep.data, np.asarray(lo, float), np.asarray(hi, float),
-            np.asarray(free, bool), start, subset_rows(prep.data))
-    out, _, _ = run_fit(mdl, loss, solver, 1e-9, 0.0, 200, 1, args, grid=False)
-    return out["v"], float(out["loss"]), int(out["code"]), int(out["steps"])
+    free = np.asarray(free, bool)
+    space = dataclasses.replace(options.space(resolve_model("ggx", 3)), lo=np.asarray(lo, float),
+                                hi=np.asarray(hi, float), free=free, values=np.where(free, np.nan, start))
+    out = solve(space, options, stack([prep.data]), starts=start[None], grid=False)
+    return out.v[0], float(out.loss[0]), int(out.code[0]), int(out.steps[0])
 
 
 START = np.asarray([0.2, 0.2, 0.2, 0.5, 0.5, 0.5, 0.3, 0.05])

@@ -217,3 +217,39 @@ def write_mosaic_btf(
     out = _write_tables(path, blocks(), fmt=format, noise=noise, seed=seed, spaces=spaces, per_view=False,
                         exposure=1.0, archive=archive)
     return out, labels, ms
+
+
+def model_btf(model, maps: Mapping[str, np.ndarray], folder, *, noise: float = 0.0, seed: int = 0, tile: int = 16,
+              name: str = "generated"):
+    """A ``BTF`` of ``model`` at per-texel parameters ``maps`` written straight into a cache file (the layout ``load_btf`` writes)
+    in ``folder`` (no images: for benchmarks at sizes whose 6561 images would take longer to write and read
+    than to fit; the values are those :func:`write_model_btf` writes to EXR, as float32)."""
+    import hashlib
+    import json
+
+    from .reader import BTF, N_PAIRS
+
+    maps = {k: (np.asarray(v)[..., None] if np.ndim(v) == 2 else np.asarray(v)) for k, v in maps.items()}
+    (h, w), = {np.shape(v)[:2] for v in maps.values()}
+    nr, nc = -(-h // tile), -(-w // tile)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    stamp = json.dumps({"model": str(getattr(model, "name", model)), "shape": [h, w], "noise": noise, "seed": seed,
+                        "tile": tile, "maps": hashlib.sha256(b"".join(np.ascontiguousarray(maps[k]).tobytes()
+                                                                      for k in sorted(maps))).hexdigest()})
+    signature = hashlib.sha256(stamp.encode()).hexdigest()[:20]
+    cache = folder / f"btf-{signature}.f32"
+    arr = np.memmap(cache, dtype=np.float32, mode="w+", shape=(nr * nc, tile * tile, N_PAIRS, 3))
+    rng = np.random.default_rng(seed)
+    for light, block in model_tables(model, maps):  # (H, W, 81, C)
+        if noise:
+            block = block * (1.0 + noise * rng.standard_normal(block.shape))
+        pad = np.zeros((nr * tile, nc * tile, UBO_SIZE, block.shape[-1]), np.float32)
+        pad[:h, :w] = block
+        tiles = pad.reshape(nr, tile, nc, tile, UBO_SIZE, -1).transpose(0, 2, 1, 3, 4, 5)
+        arr[:, :, light * UBO_SIZE : (light + 1) * UBO_SIZE] = tiles.reshape(nr * nc, tile * tile, UBO_SIZE, -1)
+    arr.flush()
+    del arr
+    meta = {"signature": signature, "options": {"generated": True, "tile": tile}, "format": "generated",
+            "read_buffer_bytes": 0}
+    return BTF(name=name, source=str(cache), height=h, width=w, channels=3, tile=tile, cache=cache, meta=meta)

@@ -9,9 +9,11 @@ EXR and HDR linear), and the value options are those of ``load``: ``scale``, ``i
 
 Memory. A BTF is usually larger than the RAM (a 256x256 UBO2003 BTF is 6561 x 256 x 256 x 3
 values: 5.2 GB as float32), so it is never held in memory. Each image is decoded exactly once and
-its texels are scattered into a *tile-major cache file* (a NumPy memory map, float32): the
-texels are grouped in tiles of ``tile x tile`` (16 x 16 by default) and each tile's 6561 x T x C
-values are contiguous, so the fit reads one tile with one sequential read. While reading, at
+its texels are scattered into a *tile-major cache file* (float32): the texels are grouped in tiles of
+``tile x tile`` (16 x 16 by default), and inside a tile each texel's 6561 x C values are contiguous, so
+the fit reads one tile with one sequential read straight into the layout it fits (texel by texel, no
+transposed copy, and with a plain file read, not a memory map whose pages would count as the process's
+memory). While reading, at
 most ``buffer_mb`` of decoded images are held before they are flushed to the cache; while
 fitting, one tile (6561 x 256 x 3 float32 = 20 MB) at a time. ``BTF.memory()`` reports the three
 figures. The cache lives in ``cache_dir`` (default: a temporary folder, removed with the BTF
@@ -63,7 +65,7 @@ class BTF:
     width: int
     channels: int
     tile: int
-    cache: Path  # tile-major float32 memory map, shape (n_tiles, 6561, tile * tile, channels)
+    cache: Path  # tile-major float32 file, shape (n_tiles, tile * tile, 6561, channels)
     meta: dict
     _owner: object = dataclasses.field(default=None, repr=False)  # keeps a temporary cache alive
 
@@ -89,15 +91,19 @@ class BTF:
 
     def _array(self, mode: str = "r") -> np.memmap:
         return np.memmap(self.cache, dtype=np.float32, mode=mode,
-                         shape=(self.n_tiles, N_PAIRS, self.tile * self.tile, self.channels))
+                         shape=(self.n_tiles, self.tile * self.tile, N_PAIRS, self.channels))
 
     # access -------------------------------------------------------------------------------------
     def tile_values(self, t: int) -> Float[np.ndarray, "h w 6561 C"]:
-        """Values of tile ``t`` as (h, w, 6561, C) float32 (one sequential read)."""
+        """Values of tile ``t`` as (h, w, 6561, C) float32: one sequential read of the file (no memory
+        map), in place for a whole tile; an edge tile's texels picked out of it."""
         r0, r1, c0, c1 = self.tile_box(t)
-        a = np.asarray(self._array()[t])  # (6561, T, C)
-        a = a.reshape(N_PAIRS, self.tile, self.tile, self.channels)[:, : r1 - r0, : c1 - c0]
-        return np.ascontiguousarray(a.transpose(1, 2, 0, 3))
+        size = self.tile * self.tile * N_PAIRS * self.channels
+        a = np.fromfile(self.cache, dtype=np.float32, count=size, offset=t * size * 4)
+        a = a.reshape(self.tile, self.tile, N_PAIRS, self.channels)
+        if (r1 - r0, c1 - c0) == (self.tile, self.tile):
+            return a
+        return np.ascontiguousarray(a[: r1 - r0, : c1 - c0])
 
     def texel(self, row: int, col: int) -> Measurement:
         """The 81x81 table of one texel as a UBO-81 Measurement."""
@@ -105,7 +111,7 @@ class BTF:
             raise UsageError(f"texel ({row}, {col}) outside the BTF's {self.height} x {self.width}")
         t = (row // self.tile) * self.tiles_shape[1] + col // self.tile
         k = (row % self.tile) * self.tile + col % self.tile
-        values = np.asarray(self._array()[t, :, k, :], np.float64)
+        values = np.asarray(self._array()[t, k], np.float64)
         return self._measurement(values, f"{self.name}[{row},{col}]")
 
     def _measurement(self, values: np.ndarray, name: str) -> Measurement:
@@ -120,7 +126,7 @@ class BTF:
         out = np.empty((self.height, self.width, self.channels), np.float32)
         for t in range(self.n_tiles):
             r0, r1, c0, c1 = self.tile_box(t)
-            block = np.asarray(arr[t, k]).reshape(self.tile, self.tile, self.channels)
+            block = np.asarray(arr[t, :, k]).reshape(self.tile, self.tile, self.channels)
             out[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
         return out
 
@@ -245,7 +251,8 @@ def _open(path: Path):
 
 def _signature(path: Path, options: dict) -> str:
     st = path.stat()
-    stamp = {"path": str(path.resolve()), "size": st.st_size, "mtime": st.st_mtime_ns, **options}
+    # ``layout``: the cache file's (texel-major inside a tile); a cache of another layout is not reused.
+    stamp = {"path": str(path.resolve()), "size": st.st_size, "mtime": st.st_mtime_ns, "layout": 2, **options}
     if path.is_dir():  # a folder's own mtime misses edits of its files: add the newest of them
         stamp["newest"] = max((f.stat().st_mtime_ns for f in path.rglob("*") if f.is_file()), default=0)
     return hashlib.sha256(json.dumps(stamp, sort_keys=True, default=str).encode()).hexdigest()[:20]
@@ -300,7 +307,7 @@ def load_btf(
         cache = folder / f"btf-{signature}.f32"
         done_marker = cache.with_suffix(".json")
         nr, nc = -(-h // tile), -(-w // tile)
-        shape = (nr * nc, N_PAIRS, tile * tile, c)
+        shape = (nr * nc, tile * tile, N_PAIRS, c)
         per_image = h * w * c * 4
         batch = max(1, min(N_PAIRS, int(buffer_mb * 2**20 // max(per_image, 1))))
         meta = {"signature": signature, "options": options, "format": "zip" if isinstance(src, _Zip) else "images",
@@ -326,9 +333,9 @@ def load_btf(
                     if k % batch == batch - 1 or k == N_PAIRS - 1:
                         k0 = k - k % batch
                         n = k - k0 + 1
-                        # (n, nr*t, nc*t, c) -> (nr, nc, n, t*t, c): one contiguous block per tile
-                        blocks = buf[:n].reshape(n, nr, tile, nc, tile, c).transpose(1, 3, 0, 2, 4, 5)
-                        arr[:, k0 : k0 + n] = blocks.reshape(nr * nc, n, tile * tile, c)
+                        # (n, nr*t, nc*t, c) -> (nr, nc, t*t, n, c): per tile and texel, a run of n pairs
+                        blocks = buf[:n].reshape(n, nr, tile, nc, tile, c).transpose(1, 3, 2, 4, 0, 5)
+                        arr[:, :, k0 : k0 + n] = blocks.reshape(nr * nc, tile * tile, n, c)
             finally:
                 PROGRESS.reset(token)
             arr.flush()

@@ -18,6 +18,8 @@ Within a tile only, so that tiles stay independent (resuming, several processes)
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .reader import BTF
@@ -55,48 +57,88 @@ def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, 
     return out
 
 
-def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:
-    """Fit the texels of tile t; arrays (h, w, ...) of params, loss, converged, steps.
+#: Texels a group of tiles holds at least (``group_tiles``), per backend: on a CPU enough for every core's
+#: chunks of lanes, on an accelerator for one call of all its lanes.
+GROUP_TEXELS = {"cpu": 1024, "device": 32768}
 
-    The tile's values are prepared once (``problem.prepare_values``: the directions and weights its
-    texels share held once, the values in the cache's float32) and every pass runs the fit driver on some
-    of its texels (``driver.solve``: no FitResult per texel, the maps need only these arrays). With
-    ``neighbours``, in the passes of :func:`neighbour_passes`: the first fits a sparse lattice of texels
-    from the initialisation grid, every later one starts each texel from its nearest fitted neighbour's
-    result, without the grid (see the module docstring); those that do not converge so are fitted again
-    from the grid."""
-    from ..fitting.driver import solve
+
+def group_tiles(btf: BTF, tiles) -> list[list[int]]:
+    """``tiles`` in groups fitted together (:func:`fit_tiles`), in order, each of at least GROUP_TEXELS
+    texels (the last may hold fewer): a pass over one 16 x 16 tile is 16 to 192 texels, too few to keep
+    a machine's lanes busy."""
+    import jax
+
+    backend = "cpu" if jax.local_devices()[0].platform == "cpu" else "device"
+    per = max(1, -(-GROUP_TEXELS[backend] // (btf.tile * btf.tile)))
+    tiles = list(tiles)
+    return [tiles[i : i + per] for i in range(0, len(tiles), per)]
+
+
+def load_tiles(btf: BTF, tiles, mdl, options):
+    """The prepared data of ``tiles`` (their texels one after another, row-major in each tile), ready for
+    :func:`fit_tiles`: (Data in the solve's unit, the space there, the unit, each tile's (h, w)). The
+    values stay float32 (``problem.prepare_values``: the directions and weights the texels share held
+    once); on an accelerator the per-texel arrays are sent to it here, so that a caller preparing the next
+    tiles in a thread overlaps their transfer with the current solve."""
+    import jax
+
     from ..fitting.problem import data_unit, in_unit, prepare_values
     from ..grid import ubo_pairs
 
-    values = btf.tile_values(t)  # (h, w, 6561, C) float32
-    h, w = values.shape[:2]
-    n = h * w
+    blocks = [btf.tile_values(t) for t in tiles]  # (h, w, 6561, C) float32 each
+    shapes = [b.shape[:2] for b in blocks]
+    values = np.concatenate([b.reshape(-1, *b.shape[2:]) for b in blocks]) if len(blocks) > 1 else \
+        blocks[0].reshape(-1, *blocks[0].shape[2:])
+    del blocks
     wi, wo = ubo_pairs()
-    data = prepare_values(values.reshape(n, *values.shape[2:]), wi, wo, np.ones(len(wi)), name=f"{btf.name} tile {t}")
+    name = f"{btf.name} tile {tiles[0]}" if len(tiles) == 1 else f"{btf.name} tiles {tiles[0]}-{tiles[-1]}"
+    data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True)
     del values
     space = options.space(mdl)
-    # The tile's unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
-    # reflectance's range); the maps in the BTF's.
+    # The unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
+    # reflectance's range); the maps come back in the BTF's.
     unit = data_unit(mdl, options.loss, data)
     data, space = in_unit(data, unit), space.in_unit(unit)
-    unscale = np.where(space.linear_mask(), unit, 1.0)
+    if jax.local_devices()[0].platform != "cpu":
+        data = data._replace(ref=jax.device_put(data.ref), floor=jax.device_put(data.floor),
+                             sqrt_w=jax.device_put(data.sqrt_w) if np.ndim(data.sqrt_w) == 3 else data.sqrt_w)
+    return data, space, unit, shapes
 
+
+def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=None,
+              clock: dict | None = None) -> list[dict[str, np.ndarray]]:
+    """Fit the texels of ``tiles`` together; per tile, arrays (h, w, ...) of params, loss, converged, steps.
+    ``loaded``: :func:`load_tiles` of them, when the caller read them ahead. ``clock``: seconds are added to
+    its "compile" and "solve" entries (the compiled stages' calls, the device's share of the work).
+
+    Every pass runs the fit driver once on its texels of every tile (``driver.solve``: no FitResult per
+    texel, the maps need only these arrays), so a pass is one batch of many texels. With ``neighbours``,
+    in the passes of :func:`neighbour_passes` within each tile: the first fits a sparse lattice of texels
+    from the initialisation grid, every later one starts each texel from its nearest fitted neighbour's
+    result, without the grid (see the module docstring); those that do not converge so are fitted again
+    from the grid."""
+    data, space, unit, shapes = loaded if loaded is not None else load_tiles(btf, tiles, mdl, options)
+    offsets = np.cumsum([0] + [h * w for h, w in shapes])
+    n = int(offsets[-1])
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
+    run = _Texels(data, space, options, clock)
 
     def fit(texels, starts=None):
-        res = solve(space, options, data, fits=texels, starts=starts, grid=starts is None, results=False)
-        return res.v, res.loss, res.code == 0, res.steps
+        return _fit_texels(run, texels, starts)
 
-    passes = neighbour_passes(h, w) if neighbours else [(np.arange(n), np.full(n, -1))]
-    for texels, sources in passes:
-        v, value, converged, steps = fit(texels, None if sources[0] < 0 else flat[sources])
+    per_tile = [neighbour_passes(h, w) if neighbours else [(np.arange(h * w), np.full(h * w, -1))] for h, w in shapes]
+    first = np.concatenate([off + passes[0][0] for off, passes in zip(offsets, per_tile)])
+    for k in range(max(len(p) for p in per_tile)):
+        texels = np.concatenate([off + p[k][0] for off, p in zip(offsets, per_tile) if k < len(p)])
+        sources = np.concatenate([np.where(p[k][1] < 0, -1, off + p[k][1]) for off, p in zip(offsets, per_tile)
+                                  if k < len(p)])
+        v, value, converged, steps = fit(texels, None if k == 0 else flat[sources])
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
     # A texel started from a neighbour that did not converge (a neighbour of another material, in
     # a basin of its own) is fitted again from the grid; the lower loss is kept.
-    again = np.flatnonzero(~out["converged"] & ~np.isin(np.arange(n), passes[0][0]))
+    again = np.flatnonzero(~out["converged"] & ~np.isin(np.arange(n), first))
     if len(again):
         v, value, converged, steps = fit(again)
         better = (converged & ~out["converged"][again]) | (value < out["loss"][again])
@@ -104,14 +146,44 @@ def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[st
         flat[keep] = v[better]
         out["loss"][keep], out["converged"][keep], out["steps"][keep] = value[better], converged[better], steps[better]
     if unit != 1.0:
-        flat *= unscale
+        flat *= np.where(space.linear_mask(), unit, 1.0)
         out["loss"] *= _loss_scale(options.loss, unit)
-    out = {k: a.reshape(h, w) for k, a in out.items()}
-    i = 0
-    for p in mdl.params:
-        out[f"param:{p.name}"] = flat[:, i : i + mdl.size(p)].reshape(h, w, -1)
-        i += mdl.size(p)
-    return out
+    results = []
+    for (h, w), s, e in zip(shapes, offsets[:-1], offsets[1:]):
+        tile = {key: a[s:e].reshape(h, w) for key, a in out.items()}
+        i = 0
+        for p in mdl.params:
+            tile[f"param:{p.name}"] = flat[s:e, i : i + mdl.size(p)].reshape(h, w, -1)
+            i += mdl.size(p)
+        results.append(tile)
+    return results
+
+
+class _Texels(NamedTuple):
+    """What the passes over a group of tiles share: their prepared data, the space, the options, a clock."""
+
+    data: object
+    space: object
+    options: object
+    clock: dict | None
+
+
+def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = None):
+    """The fit driver on ``texels`` (rows of the group's data; ``driver.solve``: no FitResult per texel, the
+    maps need only these arrays), from the grid, or from ``starts`` (n, P) alone. Returns flat params
+    (n, P), loss, converged, steps."""
+    from ..fitting.driver import solve
+
+    res = solve(run.space, run.options, run.data, fits=texels, starts=starts, grid=starts is None, results=False)
+    if run.clock is not None:
+        run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]
+        run.clock["solve"] = run.clock.get("solve", 0.0) + res.seconds["run"]
+    return res.v, res.loss, res.code == 0, res.steps
+
+
+def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:
+    """:func:`fit_tiles` of one tile."""
+    return fit_tiles(btf, [t], mdl, options, neighbours)[0]
 
 
 def _loss_scale(loss: str, unit: float) -> float:

@@ -14,11 +14,12 @@ BTF, tile by tile) check their options into one :class:`~brdffit.fitting.options
 4. the finish (``stages.finish_stage``): the loss afresh where the solver's own is not exact, metrics and
    J^T J where FitResults are made;
 5. the status tests: the solver's test, a result no worse than its start, a model that cannot reach the
-   data (every parameter on a bound, rel_rmse near 1), a given start that ends far above the default's.
+   data (every scale on a bound, rel_rmse near 1), a given start that ends far above the default's.
 
-``scipy`` runs in Python, one start after another (``solver_scipy``), after the same grid. A table far
-from reflectance's range is solved in a unit of its own (``problem.data_unit``, for the losses whose
-objective a unit only rescales) and given back in the table's.
+``scipy`` runs in Python, one start after another (``solver_scipy``), after the same grid. Every solve
+minimises the loss it reports, in the table's own unit: a table far from reflectance's range is solved in
+a unit of its own only under a loss whose objective a unit merely rescales (``problem.data_unit``: not
+``log``), and its results are given back in the table's.
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_values, prepare, resolve_model, stack
 from .._fit_defaults import STATUS_TEXT
 from .result import FitResult
-from .solve import result_check
 from .space import ParameterSpace, fit_warnings, sample_spacing
 from .structure import gauss_newton_matrix
 
@@ -47,7 +47,7 @@ from .structure import gauss_newton_matrix
 STDERR_MAX_COND = 1e12
 #: A fit from a given start whose loss ends above this factor of the default start's is not converged.
 GIVEN_START_FACTOR = 1.1
-#: rel_rmse from which a fit with every parameter on a bound has not reached the data.
+#: rel_rmse from which a fit with every scale on a bound has not reached the data.
 UNREACHED_REL_RMSE = 0.5
 
 
@@ -215,17 +215,42 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.nd
     return Solved(v, loss, code, steps, start, metrics, jtj, run.seconds, k, notes)
 
 
+def result_check(value, l0, v, code, loss_floor):
+    """(ok, code), NumPy, one entry per fit: whether the solver's point v (rows) with loss ``value``
+    (evaluated afresh) may stand, i.e. is finite and no worse than the start's loss l0 beyond
+    roundoff, whatever the solver claims; if not, a failure code (2: worse, 3: non-finite) unless the
+    solver gave one. A point at the exact-fit floor (``loss_floor``) is converged."""
+    value, l0, code, loss_floor = (np.asarray(a) for a in (value, l0, code, loss_floor))
+    finite = np.all(np.isfinite(np.asarray(v)), axis=-1) & np.isfinite(value)
+    ok = finite & (np.where(finite, value, np.inf) <= l0 * (1 + 1e-9) + loss_floor)
+    # Non-finite first: a NaN loss also fails the comparison, and must not read as "worse".
+    mine = np.where(finite, np.where(ok, 0, 2), 3)
+    code = np.where(code != 0, code, mine)
+    # An exact fit (residuals at roundoff level) has converged, whatever the solver's own stopping
+    # test said: optimistix's Gauss-Newton and BFGS test the change of every unknown, which an exact
+    # fit with a direction the data do not determine never settles (blinn_phong and oren_nayar on
+    # their own noise-free data, rel_rmse 1e-15, "did not converge" after 200 steps).
+    code = np.where(finite & (np.where(finite, value, np.inf) <= loss_floor), 0, code)
+    return ok, code
+
+
 def _unreached(run: _Run, fits: np.ndarray, v: np.ndarray, metrics: dict | None, code: np.ndarray, notes: dict) -> None:
-    """A fit with every free parameter on a bound that leaves rel_rmse near 1 has not reached the data: the
-    model cannot reach the data's level within its bounds (a table in another unit than a native model's
-    bounds allow). ``metrics``: every fit's, or None (then computed for the fits on their bounds)."""
+    """A fit whose every scale (linear parameter: reflectances, albedos) ended on a bound while rel_rmse is
+    near 1 or above has not reached the data: the model cannot reach the data's level within its bounds (a
+    table in another unit than a native model's reflectances <= 1 allow: x1e12 left every native model at
+    rel_rmse 1.0, x1e-12 principled at 1e9, both "converged"). ``metrics``: every fit's, or None (then
+    computed for the fits on their bounds)."""
+    from .space import AT_BOUND_RTOL, _span
+
     space = run.space
-    if not space.free.any():
+    scales = space.free & space.linear_mask()
+    if not scales.any():
+        scales = space.free
+    if not scales.any():
         return
-    tol_lo = 1e-6 * np.maximum(np.abs(space.lo), 1.0)
-    tol_hi = 1e-6 * np.maximum(np.abs(space.hi), 1.0)
-    on = (np.abs(v - space.lo) <= tol_lo) | (np.abs(v - space.hi) <= tol_hi)
-    every = np.flatnonzero(np.all(on | ~space.free, axis=1))
+    tol = AT_BOUND_RTOL * _span(space.model, space.lo, space.hi)
+    on = (v <= space.lo + tol) | (v >= space.hi - tol)
+    every = np.flatnonzero(np.all(on | ~scales, axis=1))
     if not len(every):
         return
     if metrics is None:
@@ -235,8 +260,8 @@ def _unreached(run: _Run, fits: np.ndarray, v: np.ndarray, metrics: dict | None,
     for i, value in zip(every, rel):
         if value >= UNREACHED_REL_RMSE:
             code[i] = 5
-            notes[int(i)] = (f"every parameter ended on a bound with rel_rmse {float(value):.3g}: the model cannot "
-                             "reach the data's level within its bounds (is the table in another unit?)")
+            notes[int(i)] = (f"every scale ended on a bound with rel_rmse {float(value):.3g}: the model cannot reach "
+                             "the data's level within its bounds (is the table in another unit?)")
 
 
 def _far_from_default(run: _Run, fits: np.ndarray, v: np.ndarray, loss: np.ndarray, code: np.ndarray,
@@ -303,9 +328,8 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     mdl = resolve_model(model, preps[0].channels)
     space = options.space(mdl)
     data = stack([p.data for p in preps])
-    # The solve works in the table's unit (problem.data_unit: 1, or a power of ten for a table far from
-    # reflectance's range under a loss that a unit only rescales; one for a batch, whose bounds are
-    # shared); results come back in the table's.
+    # problem.data_unit: 1, or a power of ten for a table far from reflectance's range under a loss a unit
+    # only rescales (one for a batch, whose bounds are shared); results come back in the table's unit.
     unit = data_unit(mdl, options.loss, data)
     unscale = np.where(space.linear_mask(), unit, 1.0)
     given = None if starts is None else np.asarray(starts, np.float64) / unscale
@@ -322,7 +346,8 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
         record.update(batch=True)
     if unit != 1.0:
         record["data_unit"] = unit
-    given_back = unit == 1.0 and res.metrics is not None  # else metrics, J^T J and loss afresh, in the table's unit
+    # else metrics, J^T J and loss afresh, in the table's unit (scipy: always)
+    given_back = unit == 1.0 and res.metrics is not None
     # space.clip: fixed entries exactly at their values after the unit's round trip
     results = [fit_result(space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]), int(res.steps[i]),
                           res.start[i] * unscale, seconds=seconds, options_record=record,

@@ -34,13 +34,18 @@ import numpy as np
 from .cache import compiled
 from .problem import Data
 
-#: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring).
+#: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring). One lane at a
+#: time: vectorising 4 or 8 gained nothing measurable on 2 cores (one evaluation of ggx on UBO-81 holds
+#: ~20 arrays of 6561 values; several lanes' no longer fit the core's cache), and a lane computed alone is
+#: computed identically whatever its chunk holds, so a BTF's maps do not depend on how its tiles were
+#: grouped (processes, Dask workers, a resumed run).
 CPU_CHUNK = 64
-CPU_LANES = 4
+CPU_LANES = 1
 #: Lanes per compiled call on an accelerator, all vectorised.
 DEVICE_CHUNK = 16384
-#: Solver steps per round (see :func:`solve_rounds`).
+#: Solver steps per round (see :func:`solve_rounds`), and the lanes below which the rest run in one call.
 ROUND_STEPS = 4
+ROUND_MIN_LANES = 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,16 +57,19 @@ class Plan:
     lanes: int
     workers: int
     devices: tuple
+    #: Ratio of one compiled size to the next (``sizes``): on an accelerator a program takes many seconds to
+    #: compile and idle lanes of a call cost little, so fewer sizes, farther apart.
+    step: int = 4
 
     def sizes(self, n: int) -> list[tuple[int, int]]:
-        """(lanes, compiled size) of each call for n lanes: full chunks, then the rest padded to the
-        next power of two (a multiple of the device count), so that few shapes are compiled."""
+        """(lanes, compiled size) of each call for n lanes: full chunks, then the rest padded to the next of
+        a few sizes (one lane per device times a power of ``step``), so that few programs are compiled."""
         out = [(self.chunk, self.chunk)] * (n // self.chunk)
         rest = n % self.chunk
         if rest:
             size = len(self.devices)
             while size < rest:
-                size *= 2
+                size *= self.step
             out.append((rest, min(size, self.chunk)))
         return out
 
@@ -80,7 +88,7 @@ def plan(chunk: int | None = None, lanes: int | None = None) -> Plan:
         workers = 1
     unit = lanes * len(devices)
     chunk = max(unit, -(-chunk // unit) * unit)
-    return Plan(chunk=chunk, lanes=lanes, workers=workers, devices=devices)
+    return Plan(chunk=chunk, lanes=lanes, workers=workers, devices=devices, step=4 if devices[0].platform == "cpu" else 256)
 
 
 def _rows(a, idx):
@@ -179,12 +187,15 @@ def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_st
     first = True
     while len(active):
         resumable = solver in RESUMABLE
-        # Few lanes left (or one fit): no chunk to empty, so the rest of the steps in one call.
-        steps = max_steps - taken if not resumable or len(active) <= p.lanes else min(ROUND_STEPS, max_steps - taken)
-        build_args = (model, loss, solver, rtol, atol, steps, first, p.lanes)
+        # Rounds where lanes are vectorised (a lane alone runs its own steps and ends with them) and more
+        # than a few are left; else the rest of the steps in one call. The budget is a run-time argument:
+        # one compiled solve serves every round.
+        rounds = resumable and p.lanes > 1 and len(active) > ROUND_MIN_LANES
+        steps = min(ROUND_STEPS, max_steps - taken) if rounds else max_steps - taken
+        build_args = (model, loss, solver, rtol, atol, max_steps, first, p.lanes)
         lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
         res, c_s, r_s = run_stage(("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
-                                  fits[active], bounds, p)
+                                  fits[active], (*bounds, np.int32(steps)), p)
         compile_s, run_s = compile_s + c_s, run_s + r_s
         v_new, resume, done, code, took = res
         if state is None:

@@ -154,18 +154,20 @@ def _usable_directions(wi: np.ndarray, wo: np.ndarray):
 _BLOCK = 256
 
 
-def prepare_values(values, wi, wo, weights, name: str = "batch") -> Data:
+def prepare_values(values, wi, wo, weights, name: str = "batch", own: bool = False) -> Data:
     """:func:`prepare` of n tables that share their directions and weights (the texels of a BTF), at once:
     ``values`` (n, N, C), kept in their own precision (a BTF's float32: the solve converts) -> the batch's
     ``Data``: ``ref`` (n, N, C) and ``floor`` (n, C) per table; the directions, cosines and weights held once
     (``sqrt_w`` per table only where some table leaves out a sample the others use). Equal to :func:`stack`
-    of ``prepare`` of each table (tested), without a Measurement per table."""
+    of ``prepare`` of each table (tested), without a Measurement per table. ``own``: the caller hands
+    ``values`` over (a float32 or float64 array): its left-out samples are zeroed in place, no copy."""
     values = np.asarray(values)
     wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
     w0 = np.asarray(weights, dtype=np.float64)
     n, N, c = values.shape
     shared = (w0 > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0) & _rows_all(np.isfinite(wi)) & _rows_all(np.isfinite(wo))
-    ref = np.array(values, dtype=values.dtype if values.dtype in (np.float32, np.float64) else np.float64)
+    keep = values.dtype in (np.float32, np.float64)
+    ref = values if own and keep else np.array(values, dtype=values.dtype if keep else np.float64)
     masks, floors = np.empty((n, N), bool), np.empty((n, c))
     for s in range(0, n, _BLOCK):  # blocks: the float64 work arrays stay small whatever n is
         block = ref[s : s + _BLOCK]
@@ -260,12 +262,13 @@ def evaluate(model: Model, params, data: Data) -> dict[str, float]:
 
 # -- the data's unit ---------------------------------------------------------------------------------
 #: A table whose mean |f_r cos theta_i| (over the used samples) lies in this range is fitted in its own
-#: unit (1/sr, the range of real reflectance); outside it (a radiometric unit change: x1e-12, x1e12)
-#: it is fitted in units of a power of ten that brings that mean near CANONICAL_MEAN, and the linear
-#: parameters are scaled back. The ``log`` loss has a unit of its own (ln(1 + f cos) is ~ f cos below 1
-#: and ~ ln(f cos) above), so without this a scaled table was another problem for it; and the solvers'
-#: steps, starts and stopping tests all see numbers of order one (issue 28: 8 of 24 fits of a table
-#: scaled by 1e-12 or 1e12 reported "converged" 1.7x-300x worse than the original's fit).
+#: unit; outside it (a radiometric unit change: x1e-12, x1e12) a fit under a loss whose objective a unit
+#: only rescales (l2, cosine_l2, cbrt, relative: every one but ``log``) is solved in units of a power of
+#: ten that brings that mean near CANONICAL_MEAN, and the linear parameters are scaled back: the same
+#: optimum, and every solver sees numbers of order one (optimistix's dogleg ran out of steps at x1e12).
+#: The ``log`` loss has a unit of its own (ln(1 + f cos)): a table in another unit is another problem for
+#: it, solved as it is (a unit of the fit's own once changed its objective: a mirror table's lambert fit
+#: minimised another loss than it reported).
 UNIT_RANGE = (1e-3, 1e2)
 CANONICAL_MEAN = 0.1
 
@@ -286,13 +289,9 @@ def homogeneous(model: Model) -> bool:
 
 
 def data_unit(model: Model, loss: str, data: Data) -> float:
-    """1.0, or the power of ten in whose units the fit of ``model`` to the batch ``data`` works (see
-    UNIT_RANGE: one unit for a batch, from the mean over all its used samples). Only for a loss whose
-    objective a unit merely rescales: the ``log`` loss has a unit of its own (ln(1 + f cos)), so a
-    table in another unit is another problem for it, and it is solved as it is (a mirror table's few
-    samples at f ~ 1e5 moved such a fit into units of 1e4, where it minimised another objective than
-    the one it reported)."""
-    if loss == "log":
+    """1.0, or the power of ten in whose units the fit of ``model`` to the batch ``data`` is solved (see
+    UNIT_RANGE: one unit for a batch, from the mean over all its used samples; 1.0 for the ``log`` loss)."""
+    if loss == "log" or not homogeneous(model):
         return 1.0
     ref = np.abs(np.asarray(data.ref, np.float64) * np.asarray(data.cos_i))
     used = np.broadcast_to(np.asarray(data.sqrt_w) > 0, ref.shape[:-1] + (1,))
@@ -300,7 +299,7 @@ def data_unit(model: Model, loss: str, data: Data) -> float:
     if not total:
         return 1.0
     mean = float(np.sum(np.where(used, ref, 0.0)) / total)
-    if not (np.isfinite(mean) and mean > 0) or UNIT_RANGE[0] <= mean <= UNIT_RANGE[1] or not homogeneous(model):
+    if not (np.isfinite(mean) and mean > 0) or UNIT_RANGE[0] <= mean <= UNIT_RANGE[1]:
         return 1.0
     return float(10.0 ** round(np.log10(mean / CANONICAL_MEAN)))
 

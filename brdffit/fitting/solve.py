@@ -47,27 +47,6 @@ def fit_constants(model: Model, loss: str, data: Data) -> FitConstants:
     return FitConstants(g_ref, geometry, 1e-26 * jnp.sum(r0 * r0))
 
 
-def result_check(value, l0, v, code, loss_floor):
-    """(ok, code), NumPy, one entry per fit: whether the solver's point v (rows) with loss ``value``
-    (evaluated afresh) may stand, i.e. is finite and no worse than the start's loss l0 beyond
-    roundoff, whatever the solver claims; if not, a failure code (2: worse, 3: non-finite) unless the
-    solver gave one. A point at the exact-fit floor (``loss_floor``) is converged."""
-    import numpy as np
-
-    value, l0, code, loss_floor = (np.asarray(a) for a in (value, l0, code, loss_floor))
-    finite = np.all(np.isfinite(np.asarray(v)), axis=-1) & np.isfinite(value)
-    ok = finite & (np.where(finite, value, np.inf) <= l0 * (1 + 1e-9) + loss_floor)
-    # Non-finite first: a NaN loss also fails the comparison, and must not read as "worse".
-    mine = np.where(finite, np.where(ok, 0, 2), 3)
-    code = np.where(code != 0, code, mine)
-    # An exact fit (residuals at roundoff level) has converged, whatever the solver's own stopping
-    # test said: optimistix's Gauss-Newton and BFGS test the change of every unknown, which an exact
-    # fit with a direction the data do not determine never settles (blinn_phong and oren_nayar on
-    # their own noise-free data, rel_rmse 1e-15, "did not converge" after 200 steps).
-    code = np.where(finite & (np.where(finite, value, np.inf) <= loss_floor), 0, code)
-    return ok, code
-
-
 def model_loss(model: Model, loss: str):
     """loss_of(v, data, consts): the fit's loss at v, the model's values by the step's route
     (``structure.model_values``: model.eval costs ~10x more on ggx/UBO-81)."""

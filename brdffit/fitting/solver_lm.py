@@ -24,6 +24,7 @@ import optimistix as optx
 from ..models.base import Model
 from .linalg import inverse_quadratic_form, spd_solve
 from .problem import flat_residual
+from .stages import Resume
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Array, Bool, Float, Int
@@ -51,6 +52,7 @@ class _LMState(eqx.Module):
     nu: Float[Array, ""]
     done: Bool[Array, ""]
     result: optx.RESULTS
+    taken: Int[Array, ""]  # steps of this solve (the budget of ``options["steps"]``)
 
 
 def _normal_equations(fn, y, args):
@@ -109,11 +111,11 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             # A solve continued from a previous round's state (:class:`Resume`): exactly the iteration
             # that one long solve would have run, with no evaluation at the start.
             return _LMState(c=resume.c, c0=resume.c0, g=resume.g, H=resume.H, lam=resume.lam, nu=resume.nu,
-                            done=jnp.asarray(False), result=optx.RESULTS.successful)
+                            done=jnp.asarray(False), result=optx.RESULTS.successful, taken=jnp.asarray(0))
         c, g, H = self._normal(fn, y, args)
         dtype = y.dtype
         return _LMState(c=c, c0=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
-                        done=jnp.asarray(False), result=optx.RESULTS.successful)
+                        done=jnp.asarray(False), result=optx.RESULTS.successful, taken=jnp.asarray(0))
 
     def step(self, fn, y, args, options, state: _LMState, tags):
         lo, hi, free = options["lower"], options["upper"], options["free"]
@@ -176,34 +178,28 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         stuck = (~accept) & (lam_next > 1e16)
         done = small_f | small_g | small_dec | exact | stuck
         result = optx.RESULTS.where(jnp.isfinite(c_next), optx.RESULTS.successful, optx.RESULTS.nonfinite)
-        new_state = _LMState(c=c_next, c0=state.c0, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result)
+        new_state = _LMState(c=c_next, c0=state.c0, g=g_next, H=H_next, lam=lam_next, nu=nu_next, done=done, result=result,
+                             taken=state.taken + 1)
         return y_next, new_state, None
 
     def terminate(self, fn, y, args, options, state: _LMState, tags):
-        return state.done, state.result
+        # ``options["steps"]``: this solve's budget at run time (a round of a fit solved in rounds), below the
+        # compiled ``max_steps``: one compiled solve serves every round.
+        budget = options.get("steps")
+        if budget is None:
+            return state.done, state.result
+        spent = ~state.done & (state.taken >= budget)
+        return state.done | spent, optx.RESULTS.where(spent, optx.RESULTS.nonlinear_max_steps_reached, state.result)
 
     def postprocess(self, fn, y, aux, args, options, state: _LMState, tags, result):
         return y, aux, {"resume": Resume(state.c, state.c0, state.g, state.H, state.lam, state.nu), "done": state.done}
 
 
-class Resume(NamedTuple):
-    """What a solve continues from (``options["resume"]``): the last round's loss ``c``, the start's
-    loss ``c0``, the gradient and Gauss-Newton matrix at the point, and the damping ``lam``, ``nu``. A
-    fit is solved in rounds of a few steps (``stages``): between rounds the fits that are done leave
-    the batch, the others go on from here, as one long solve would."""
-
-    c: jax.Array
-    c0: jax.Array
-    g: jax.Array
-    H: jax.Array
-    lam: jax.Array
-    nu: jax.Array
-
-
 def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
-    """run(v0 (P,), data, lo, hi, free, consts, resume=None) -> (v, Resume, done, code, steps) with
-    :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most
-    ``max_steps`` steps from v0, or from a previous round's ``resume`` (then v0 is that round's v).
+    """run(v0 (P,), data, lo, hi, free, consts, resume=None, steps=None) -> (v, Resume, done, code, steps) with
+    :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most ``max_steps``
+    steps (or ``steps``, a run-time budget below it) from v0, or from a previous round's ``resume`` (then v0
+    is that round's v).
     ``Resume.c`` is the loss at v, ``Resume.H`` J^T J there, ``Resume.c0`` the loss at the first start;
     ``done``: the solver's own test passed."""
     from .structure import normal_equations
@@ -213,11 +209,13 @@ def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
     # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
     solver = BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=lambda y, a: ne(y, *a))
 
-    def run(v0, data, lo, hi, free, consts, resume=None):
+    def run(v0, data, lo, hi, free, consts, resume=None, steps=None):
         v0 = jnp.clip(v0, lo, hi)
         options = {"lower": lo, "upper": hi, "free": free, "loss_floor": consts.loss_floor}
         if resume is not None:
             options["resume"] = resume
+        if steps is not None:
+            options["steps"] = steps
         sol = optx.least_squares(lambda v, a: fn(v, a[0]), solver, v0, args=(data, consts.g_ref, consts.geometry),
                                  options=options, max_steps=max_steps, throw=False)
         # The iterate moves only to accepted points (finite, lower loss): the final state's

@@ -70,7 +70,7 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
     """run(v0 (P,), data, lo, hi, free, consts) -> (v, Resume, done, code, steps) with the stock solver
     ``name`` (``Resume``: the loss at v and at v0, J^T J at v; the damping entries 0: a stock solve does
     not continue); ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
-    from .solver_lm import Resume
+    from .stages import Resume
     from .structure import gauss_newton_matrix
 
     fn = flat_residual(model, loss)
@@ -83,18 +83,29 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
         Why: optimistix's Levenberg-Marquardt damps with lambda * I starting at 1, its dogleg
         starts with a unit trust radius and BFGS with an identity Hessian; our Jacobian columns
         span 1e-3..1e2, and unscaled they spent 60-160 steps reaching the Gauss-Newton regime.
-        Jacobi scaling makes lambda * I act like Marquardt's damping."""
+        Jacobi scaling makes lambda * I act like Marquardt's damping. The residuals are divided by their
+        norm at the start: the same objective up to a constant factor (the same optimum), and the solver
+        sees numbers of order one whatever the table's unit (BFGS's first step is the gradient itself: at
+        x1e-12 it stopped "converged" at 3x the optimum's loss)."""
         v0 = jnp.clip(v0, lo, hi)
         x0 = from_box(v0, lo, hi)
+        r0 = fn(v0, data)
+        size = jnp.sqrt(r0 @ r0)
+        size = jnp.where(jnp.isfinite(size) & (size > 0), size, 1.0)
 
         def fn_x(x, data):
             # Held parameters stay at their start value; their columns are zero.
-            return fn(to_box(jnp.where(free, x, x0), lo, hi), data)
+            return fn(to_box(jnp.where(free, x, x0), lo, hi), data) / size
 
         jac = jax.jacfwd(fn_x)(x0, data)
         norms = jnp.sqrt(jnp.sum(jac**2, axis=0))
         norms = jnp.where(jnp.isfinite(norms), norms, 0.0)
-        norms = jnp.maximum(norms, 1e-3 * jnp.max(norms)) / COLUMN_NORM
+        # A floor for near-zero columns, on the effect of a *relative* change of each variable: a scale of a
+        # table x1e12 is ~1e11 with a column ~1e-11, and an absolute floor took it for a dead column (BFGS
+        # did not move in 200 steps).
+        magnitude = jnp.where(x0 != 0, jnp.abs(x0), 1.0)
+        effect = norms * magnitude
+        norms = jnp.maximum(effect, 1e-3 * jnp.max(effect)) / magnitude / COLUMN_NORM
         scale = jnp.where(norms > 0, norms, 1.0)
         sol = optx.least_squares(lambda z, d: fn_x(z / scale, d), solver, x0 * scale, args=data,
                                  max_steps=max_steps, throw=False)

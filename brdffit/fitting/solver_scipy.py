@@ -33,22 +33,30 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
         v[free] = u
         return jnp.asarray(v)
 
+    # The residuals divided by their norm at the start (the same optimum; numbers of order one whatever the
+    # table's unit), and TRF's variables scaled by the Jacobian's columns (x_scale="jac"): at x1e-12 scipy's
+    # absolute gradient test stopped at 1e7 times the optimum's loss, and at x1e12 the kd ~ 1e11 hid
+    # alpha's steps from its relative step test.
+    r0 = np.asarray(res(jnp.asarray(v_full), data))
+    size = float(np.sqrt(r0 @ r0))
+    size = size if np.isfinite(size) and size > 0 else 1.0
+
     def f(u):
-        return np.asarray(res(expand(u), data))
+        return np.asarray(res(expand(u), data)) / size
 
     def j(u):
-        return np.asarray(jacf(expand(u), data))[:, free]
+        return np.asarray(jacf(expand(u), data))[:, free] / size
 
     t0 = time.perf_counter()
     sol = least_squares(
-        f, v_full[free], jac=j if jac == "exact" else jac, bounds=(lo[free], hi[free]), method="trf",
+        f, v_full[free], jac=j if jac == "exact" else jac, bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
         # scipy's gtol is absolute (on the scaled gradient): left at its floor, ftol/xtol stop it.
         ftol=max(rtol, 1e-15), xtol=max(rtol, 1e-15), gtol=1e-15, max_nfev=max_steps * 10,
     )
     run_s = time.perf_counter() - t0
     v = np.asarray(expand(sol.x))
-    value = float(np.sum(sol.fun**2))
+    value = float(np.sum(sol.fun**2)) * size**2
     code = 0 if sol.status > 0 else (1 if sol.status == 0 else 4)
     if not (np.all(np.isfinite(v)) and np.isfinite(value)):
-        v, value, code = v_full, float(np.sum(f(v_full[free]) ** 2)), 3
+        v, value, code = v_full, float(np.sum(f(v_full[free]) ** 2)) * size**2, 3
     return v, value, code, int(sol.nfev), c1 + c2, run_s

@@ -25,6 +25,7 @@ without tracing, and without importing optimistix.
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -83,6 +84,21 @@ def _solve_dtype(data: Data) -> Data:
     return data._replace(ref=data.ref.astype(dtype))
 
 
+class Resume(NamedTuple):
+    """What a solve continues from (``options["resume"]`` of ``solver_lm``): the last round's loss ``c``, the
+    start's loss ``c0``, the gradient and Gauss-Newton matrix at the point, and the damping ``lam``, ``nu``.
+    A fit is solved in rounds of a few steps (:func:`round_stage`): between rounds the fits that are done
+    leave the batch, the others go on from here, as one long solve would. (Defined here, not beside the
+    solver: a compiled round kept on disk names this type, and loading it must not import optimistix.)"""
+
+    c: jax.Array
+    c0: jax.Array
+    g: jax.Array
+    H: jax.Array
+    lam: jax.Array
+    nu: jax.Array
+
+
 # -- stages -----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
 def start_stage(model: Model, loss: str, k: int, grid: bool, lanes: int):
@@ -121,25 +137,26 @@ def start_stage(model: Model, loss: str, k: int, grid: bool, lanes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, steps: int, first: bool,
+def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, first: bool,
                 lanes: int):
-    """run((v (L, P), resume), data, lo, hi, free) -> (v, resume, done (L,), code (L,), steps (L,)): at most
-    ``steps`` steps of each lane. ``first``: from the start v (``resume`` is None); else from the previous
-    round's ``resume`` (``solver_lm.Resume``, one row per lane). For a stock solver (not resumable) the
-    one round's ``resume`` holds the loss at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
+    """run((v (L, P), resume), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)):
+    at most ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v
+    (``resume`` is None); else from the previous round's ``resume`` (``solver_lm.Resume``, one row per
+    lane). A stock solver (not resumable) runs ``max_steps`` in its one round; its ``resume`` holds the loss
+    at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
     from .solve import fit_constants, solve_one  # optimistix: imported only when a program is traced
 
-    solve = solve_one(model, loss, solver, rtol, atol, steps)
+    solve = solve_one(model, loss, solver, rtol, atol, max_steps)
 
-    def one(v, resume, data, lo, hi, free):
+    def one(v, resume, data, lo, hi, free, steps):
         data = _solve_dtype(data)
         consts = fit_constants(model, loss, data)
         if solver in RESUMABLE:
-            return solve(v, data, lo, hi, free, consts, resume)
+            return solve(v, data, lo, hi, free, consts, resume, steps)
         return solve(v, data, lo, hi, free, consts)
 
-    def run(lane, data, lo, hi, free):
-        return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free), lane, data, lanes)
+    def run(lane, data, lo, hi, free, steps):
+        return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, steps), lane, data, lanes)
 
     return run
 

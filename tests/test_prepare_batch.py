@@ -1,5 +1,6 @@
-"""``problem.prepare_stack`` (the texels of a BTF at once) equals ``prepare`` of each texel's
-Measurement stacked: excluded samples, per-texel weight normalisation and floors included."""
+"""``problem.prepare_values`` (the texels of a BTF at once) equals ``stack`` of ``prepare`` of each
+texel's Measurement: excluded samples, per-texel weight normalisation and floors included, the
+directions and weights the texels share held once."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pytest
 
 import brdffit
 from brdffit.errors import UsageError
-from brdffit.fitting.problem import prepare, prepare_stack
+from brdffit.fitting.problem import prepare, prepare_values, stack
 from brdffit.grid import ubo_pairs
 
 
@@ -29,25 +30,34 @@ def test_equals_prepare_of_each_texel():
     wi[40] = (1.0, 0.0, 0.0)  # a light exactly on the horizon: excluded, as below it
     wi[60] = (np.sqrt(1.0 - 1e-18), 0.0, 1e-9)  # a grazing light: used, its cosine clipped to 1e-7
     wo[50] = (0.0, 1.0, 0.0)  # a view exactly on the horizon
-    got = prepare_stack(values, wi, wo, weights)
-    for k in range(n):
-        want = prepare(brdffit.Measurement(wi, wo, values[k], weights=weights, name=f"t{k}")).data
-        for a, b in zip(got, want):
-            np.testing.assert_allclose(a[k], np.asarray(b), rtol=1e-15, atol=0)
-    assert np.all(got[3][:, [30, 40, 50]] == 0.0)  # sqrt_w: excluded samples weigh nothing
+    got = prepare_values(values, wi, wo, weights)
+    want = stack([prepare(brdffit.Measurement(wi, wo, values[k], weights=weights, name=f"t{k}")).data for k in range(n)])
+    for field, a, b in zip(got._fields, got, want):
+        assert a.shape == b.shape, field
+        np.testing.assert_allclose(a, b, rtol=1e-15, atol=0)
+    assert got.wi.shape == (N, 3) and got.sqrt_w.shape == (n, N, 1)  # directions once; weights per texel here
+    assert np.all(got.sqrt_w[:, [30, 40, 50]] == 0.0)  # excluded samples weigh nothing
 
 
-def test_float32_inputs_give_the_float64_arrays_of_prepare():
-    """A BTF tile arrives as float32 (EXR halves/floats); the fit runs in float64 like ``prepare``."""
+def test_texels_with_every_sample_share_their_weights():
+    wi, wo = ubo_pairs()
+    values = np.random.default_rng(1).uniform(0.0, 2.0, (3, len(wi), 3))
+    got = prepare_values(values, wi, wo, np.ones(len(wi)))
+    assert got.sqrt_w.shape == (len(wi), 1) and got.ref.shape == values.shape and got.floor.shape == (3, 3)
+
+
+def test_float32_values_are_kept_and_the_rest_is_the_float64_of_prepare():
+    """A BTF tile arrives as float32 (its cache): the values stay so (half the memory; the solve converts
+    them exactly), everything else is prepare's float64."""
     wi, wo = ubo_pairs()
     values = np.random.default_rng(2).uniform(0.0, 2.0, (2, len(wi), 3))
     f32 = [np.asarray(a, np.float32) for a in (values, wi, wo, np.ones(len(wi)))]
-    got = prepare_stack(*f32)
+    got = prepare_values(*f32)
     want = prepare(brdffit.Measurement(*(np.asarray(a, np.float64) for a in f32[1:3]), np.asarray(f32[0][1], np.float64),
                                        name="t1")).data
-    for a, b in zip(got, want):
-        assert a.dtype == np.float64
-        np.testing.assert_allclose(a[1], np.asarray(b), rtol=1e-15, atol=0)
+    for field, a, b in zip(got._fields, got, want):
+        assert a.dtype == (np.float32 if field == "ref" else np.float64), field
+        np.testing.assert_allclose(a[1] if field in ("ref", "floor") else a, np.asarray(b), rtol=1e-15, atol=0)
 
 
 def test_a_texel_without_valid_samples_is_a_usage_error():
@@ -55,7 +65,7 @@ def test_a_texel_without_valid_samples_is_a_usage_error():
     values = np.ones((2, len(wi), 3))
     values[1] = np.nan
     with pytest.raises(UsageError) as caught:
-        prepare_stack(values, wi, wo, np.ones(len(wi)), name="tile")
+        prepare_values(values, wi, wo, np.ones(len(wi)), name="tile")
     assert str(caught.value) == ("tile[1]: no valid samples to fit (all have weight 0, non-finite values or lie "
                                  "below the horizon)")
 
@@ -64,4 +74,4 @@ def test_the_default_name_is_batch():
     wi, wo = ubo_pairs()
     values = np.full((2, len(wi), 3), np.nan)
     with pytest.raises(UsageError, match=r"^batch\[0\]: no valid samples"):
-        prepare_stack(values, wi, wo, np.ones(len(wi)))
+        prepare_values(values, wi, wo, np.ones(len(wi)))
