@@ -54,7 +54,10 @@ def mtlx_text(model_name: str, native: dict, name: str, extras: dict) -> str:
         port = shader.addInput(key, kind)
         port.setValue(mx.Color3(*value) if kind == "color3" else value, kind)
     material = doc.addMaterialNode(material_name, shader)
-    material.setAttribute("brdffit", json_text(extras, sort_keys=True))
+    # MaterialX's writer leaves '<' unescaped in an attribute (not well-formed XML): JSON's own
+    # escapes keep the markup characters out of the text (they occur only inside JSON strings)
+    text = json_text(extras, sort_keys=True)
+    material.setAttribute("brdffit", text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026"))
     about = extras.get("brdffit", extras) if isinstance(extras, dict) else {}
     material.setDocString(f"brdffit fit of {about.get('model', model_name)} as {SHADERS[model_name]}")
     return mx.writeToXmlString(doc)
