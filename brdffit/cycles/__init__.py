@@ -93,6 +93,9 @@ def budget(op: str, args: dict) -> float:
     return BUDGET_S
 
 
+_ENDED = object()  # what Worker._receive returns once the worker's output has ended
+
+
 class Worker:
     """One Blender process answering requests (see the module docstring). It runs in a session of
     its own with its own temporary folder (``scratch``: Blender's ``blender_*`` folder and every
@@ -123,7 +126,7 @@ class Worker:
         except BaseException:
             self.close()
             raise
-        if hello is None or not hello.get("ready"):
+        if hello is None or hello is _ENDED or not hello.get("ready"):
             why = self.log_tail() or "no output"
             self.close()
             raise UsageError(f"{self.python}: the Blender worker did not start ({why})")
@@ -135,12 +138,14 @@ class Worker:
         self._lines.put(None)  # the worker ended
 
     def _receive(self, timeout: float | None) -> dict | None:
+        """The next reply; None when none came within ``timeout``, ``_ENDED`` when the worker's
+        output ended (it may not be reaped yet: ``alive`` cannot tell these apart)."""
         try:
             raw = self._lines.get(timeout=timeout)
         except queue.Empty:
             return None
         if raw is None:
-            return None
+            return _ENDED
         try:
             answer = json.loads(raw)
         except ValueError:
@@ -179,10 +184,9 @@ class Worker:
             except BaseException:  # a Ctrl-C while it works: its state is unknown
                 self._stop()
                 raise
-            if answer is None:
-                hung = self.alive
+            if answer is None or answer is _ENDED:
                 self._stop()
-                if hung:
+                if answer is None:
                     raise BlenderError(f"the Blender worker did not answer {op!r} within {timeout:g} s (stopped)")
                 raise BlenderError(f"the Blender worker ended during {op!r} ({self.log_tail() or 'no output'})")
             if answer.get("id") != request["id"]:
