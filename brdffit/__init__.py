@@ -7,10 +7,10 @@ parts of brdffit that compute with JAX enable ``jax_enable_x64`` when they are f
 
 from __future__ import annotations
 
-from . import _files
+from . import _interrupt
 
-if _files.is_the_executable():  # the `brdffit` command: Ctrl-C from its first moment is one line, 130
-    _files.end_process_on_interrupt()
+if _interrupt.is_the_executable():  # the `brdffit` command: Ctrl-C from its first moment is one line, 130
+    _interrupt.end_process_on_interrupt()
 
 import importlib  # noqa: E402
 

@@ -14,9 +14,9 @@
 - What a file holds is valid for its format whatever the data: :func:`json_text` writes strict
   JSON (a non-finite number is null), :func:`plain_text` removes the characters no text file may
   hold (controls, lone surrogates) from names written into files.
-- The ``brdffit`` executable's Ctrl-C (:func:`end_process_on_interrupt`) ends the process at once
-  and removes what this run wrote, its scratch folders (:func:`scratch_dir`) and its helper
-  processes (:func:`start_process`) included.
+- The ``brdffit`` executable's Ctrl-C (``brdffit._interrupt``) ends the process at once and removes
+  what this run wrote (:func:`remove_this_runs_outputs`), its scratch folders (:func:`scratch_dir`)
+  and its helper processes (:func:`start_process`) included.
 """
 
 from __future__ import annotations
@@ -30,8 +30,6 @@ import math
 import os
 import re
 import shutil
-import signal
-import sys
 import tempfile
 import threading
 from pathlib import Path
@@ -344,57 +342,6 @@ def start_process(argv: list[str], **popen_options):
 def forget_process(proc) -> None:
     with _GUARD, contextlib.suppress(ValueError):
         _PROCESSES.remove(proc)
-
-
-# -- the executable's Ctrl-C ------------------------------------------------------------------------
-EXIT_INTERRUPTED = 130
-_WATCHING: list[bool] = []
-
-
-def ends_process_on_interrupt() -> bool:
-    """Whether :func:`end_process_on_interrupt` is in force in this process."""
-    return bool(_WATCHING)
-
-
-def is_the_executable() -> bool:
-    """Whether this process is the ``brdffit`` executable (its console script is ``__main__``)."""
-    script = getattr(sys.modules.get("__main__"), "__file__", None)
-    return bool(sys.argv and script) and os.path.basename(sys.argv[0]) == "brdffit" and \
-        os.path.abspath(script) == os.path.abspath(sys.argv[0])
-
-
-def end_process_on_interrupt() -> None:
-    """Make Ctrl-C end this process at once, whatever it is doing, leaving nothing written (the
-    ``brdffit`` executable: installed by the package's first line, before its imports, so that a
-    Ctrl-C at any moment of the command is one line and exit 130; again by ``cli.entry`` for
-    ``python -m brdffit``; a second call does nothing).
-
-    An exception raised by a signal handler lands wherever the interpreter is: inside a compiler's
-    callback or an extension module's initialisation it aborted the process (-6), crashed it (-11)
-    or hung it, inside an import it printed a ``KeyboardInterrupt`` traceback, and after a commit it
-    reported 130 with the result written (measured by benchmarks/bench_interrupt.py). So the handler
-    raises nothing: the C-level signal handler writes the signal's number to a pipe
-    (``signal.set_wakeup_fd``), a daemon thread waiting on it wakes within milliseconds even while
-    the main thread runs native code, stops this run's helper processes and removes what it wrote
-    (:func:`remove_this_runs_outputs`, which waits for a commit in progress), says so in one line and
-    ends the process with 130 (``os._exit``: no teardown of native libraries in their work)."""
-    if _WATCHING or threading.current_thread() is not threading.main_thread():
-        return
-    read_end, write_end = os.pipe()
-    os.set_blocking(write_end, False)
-
-    def watch() -> None:
-        while signal.SIGINT not in os.read(read_end, 64):
-            pass
-        STOP_REQUESTED.set()
-        remove_this_runs_outputs()
-        os.write(2, b"brdffit: interrupted\n")
-        os._exit(EXIT_INTERRUPTED)
-
-    threading.Thread(target=watch, name="brdffit-interrupt", daemon=True).start()
-    signal.signal(signal.SIGINT, lambda signum, frame: None)  # the watcher acts; a C handler is needed
-    signal.set_wakeup_fd(write_end, warn_on_full_buffer=False)
-    _WATCHING.append(True)
 
 
 # -- what a file may hold ---------------------------------------------------------------------------

@@ -57,7 +57,8 @@ def _interrupts_raise():
     """Ctrl-C raises :class:`Interrupted` and sets ``STOP_REQUESTED``, which stops any result from
     being committed even where the exception is swallowed (a signal landing in a garbage-collection
     callback or a ``__del__``); ``main`` then reports the run as interrupted."""
-    from .._files import STOP_REQUESTED, ends_process_on_interrupt
+    from .._files import STOP_REQUESTED
+    from .._interrupt import ends_process_on_interrupt
 
     if threading.current_thread() is not threading.main_thread() or ends_process_on_interrupt():
         yield  # the executable: its Ctrl-C ends the process from a watcher thread (_files)
@@ -104,7 +105,8 @@ def _stop_if_interrupted() -> None:
     thread stops the Blender worker, so the command sees it end). Say nothing of it: in the
     executable, wait for the watcher to end the process with its one line; else raise
     :class:`Interrupted`."""
-    from .._files import STOP_REQUESTED, ends_process_on_interrupt
+    from .._files import STOP_REQUESTED
+    from .._interrupt import ends_process_on_interrupt
 
     if not STOP_REQUESTED.is_set():
         return
@@ -200,14 +202,14 @@ def entry() -> None:
     teardown does not walk all of them again. Measured on a second-process ``brdffit fit``: the
     default settings cost ~0.8 s CPU of ~3.3 s, most of it in that teardown (atexit handlers
     and module teardown still run; the exit is not skipped). Ctrl-C ends the process from a watcher
-    thread (``_files.end_process_on_interrupt``; the package's first line installs it already).
+    thread (``brdffit._interrupt``; the package's first line installs it already).
     (It used to skip the teardown with ``os._exit`` to save ~0.4 s; that also hid the abort at exit
     of issue 13 -- a daemon compile thread -- which is fixed in the library now, and skipped
     atexit handlers such as coverage's.)
     """
     import gc
 
-    from .._files import end_process_on_interrupt
+    from .._interrupt import end_process_on_interrupt
 
     end_process_on_interrupt()  # done already unless run as `python -m brdffit`
     gc.set_threshold(*GC_THRESHOLDS)

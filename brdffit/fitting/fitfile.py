@@ -106,13 +106,18 @@ def _number_or_null(x) -> bool:
     return x is None or _is_number(x)
 
 
-def _text_map(value, what: str, path, names=None) -> None:
-    """``value`` must be an object of strings (keys among ``names`` when given)."""
-    if not isinstance(value, dict) or not all(isinstance(v, str) for v in value.values()):
-        raise InputError(path, f"field {what!r} must be an object name -> text")
-    unknown = [k for k in value if names is not None and k not in names]
+def _check_at_bound(value, path, model) -> None:
+    """``at_bound``: parameter name -> text ("lower", "upper in channel 0", as ``ParameterSpace.at_bound``
+    writes it) or per-channel flags (a list of booleans, as files of earlier writers may hold)."""
+    def entry_ok(v) -> bool:
+        return isinstance(v, str) or (isinstance(v, list) and 0 < len(v) <= model.channels
+                                      and all(isinstance(x, bool) for x in v))
+
+    if not isinstance(value, dict) or not all(entry_ok(v) for v in value.values()):
+        raise InputError(path, "field 'at_bound' must be an object parameter -> text (e.g. \"lower\")")
+    unknown = [k for k in value if k not in model.param_names]
     if unknown:
-        raise InputError(path, f"field {what!r} names {unknown[0]!r}, not a parameter of the model")
+        raise InputError(path, f"field 'at_bound' names {unknown[0]!r}, not a parameter of the model")
 
 
 def _number_list(value, what: str, path, allow_null: bool = False) -> list[float]:
@@ -170,7 +175,7 @@ def check_fit_document(d: dict[str, Any], path=None):
             if not isinstance(m, dict) or not all(_number_or_null(v) for v in m.values()):
                 raise InputError(path, f"field {key!r} must be an object of numbers")
     if "at_bound" in d and d["at_bound"] is not None:
-        _text_map(d["at_bound"], "at_bound", path, names=model.param_names)
+        _check_at_bound(d["at_bound"], path, model)
     if "warnings" in d and d["warnings"] is not None:
         if not (isinstance(d["warnings"], list) and all(isinstance(w, str) for w in d["warnings"])):
             raise InputError(path, "field 'warnings' must be a list of sentences (text)")

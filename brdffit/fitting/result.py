@@ -34,6 +34,20 @@ def _float(x) -> float:
     return float("nan") if x is None else float(x)
 
 
+def _at_bound(recorded: dict) -> dict[str, str]:
+    """A fit file's ``at_bound`` (checked by ``fitfile``): text as it is; per-channel flags (a list of
+    booleans) as the text they stand for, a side not being recorded ("on a bound in channel 2")."""
+    out = {}
+    for name, v in recorded.items():
+        if isinstance(v, str):
+            out[name] = v
+        elif any(v):
+            on = [str(i) for i, flag in enumerate(v) if flag]
+            out[name] = "on a bound" if len(on) == len(v) else \
+                f"on a bound in channel{'s' if len(on) > 1 else ''} {', '.join(on)}"
+    return out
+
+
 def _code_of(status: str, converged: bool) -> int:
     """The status code a status text stands for (0 for any converged text, 4 for one unknown)."""
     if converged:
@@ -248,7 +262,7 @@ class FitResult:
             start={k: np.asarray(v, dtype=np.float64) for k, v in d.get("start", {}).items()},
             options=dict(d.get("options", {})),
             # Absent from fit.json files written before they existed: none recorded.
-            at_bound={str(k): str(v) for k, v in (d.get("at_bound") or {}).items()},
+            at_bound=_at_bound(d.get("at_bound") or {}),
             warnings=tuple(str(w) for w in (d.get("warnings") or ())),
         )
 
