@@ -118,6 +118,15 @@ def test_fit_is_brdffit_fit_from_the_values_shown(explorer, m):
     assert explorer.state["status"] == "set by hand" and explorer.state["warnings"] == []
 
 
+def test_multistart_is_brdffit_fit_from_its_start_grid(explorer, m):
+    explorer.set_params(alpha=0.9)  # not a start of the grid's
+    explorer._on_action(explorer, {"action": "multistart"}, [])
+    same = brdffit.fit(m, "ggx", multistart=8)
+    for name, value in same.params.items():
+        np.testing.assert_array_equal(explorer.params[name], value)
+    assert explorer.result.options == same.options
+
+
 def test_an_explorer_can_start_from_a_fit_file(m, tmp_path):
     r = brdffit.fit(m, "lambert+ggx")
     r.to_json(tmp_path / "fit.json")
@@ -160,6 +169,23 @@ def test_the_light_moves_the_slices_the_spheres_and_the_table_marker(explorer):
     assert after["loss"] == before["loss"]  # the loss is over the whole table, whatever the light
     explorer.light = (30, 400)  # phi is taken modulo 360
     assert explorer.light == (30.0, 40.0)
+
+
+def test_exposure_brightens_the_spheres_by_stops(explorer):
+    dark = explorer.state
+    explorer.exposure = 1.0
+    bright = explorer.state
+    for name in ("measured", "fitted", "log_ratio", "slices"):
+        assert bright["images"][name] == dark["images"][name], name
+    # one stop: twice the linear value before the sRGB curve (compared where neither clips)
+    a, b = (rgb(x["images"]["sphere_measured"]).astype(float) / 255 for x in (dark, bright))
+
+    def linear(v):
+        return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+    ok = (a > 0.2) & (b < 0.9)
+    assert ok.sum() > 1000
+    np.testing.assert_allclose(linear(b[ok]), 2 * linear(a[ok]), rtol=0.03, atol=0.004)
 
 
 def test_the_sphere_preview_is_the_validation_sphere_at_the_pixel_centres(explorer):
@@ -247,3 +273,29 @@ def test_figure_shows_the_same_view(explorer):
     text = "\n".join(t.get_text() for a in fig.axes for t in a.texts)
     assert f"log loss {explorer.state['loss']:.4g}" in text
     assert explorer._repr_png_().startswith(b"\x89PNG")
+
+
+@pytest.mark.mitsuba
+def test_render_shows_mitsuba_spheres_which_the_preview_matches(explorer):
+    """Render: both spheres rendered by Mitsuba (brdffit.render_sphere) under the light, shown until
+    the next change; the preview they replace agrees with them inside the disc (the preview takes
+    each pixel's centre, a render averages its footprint: they differ at the silhouette)."""
+    explorer.fit()
+    explorer.light = (40, 30)
+    preview = explorer.state
+    previews = explorer._view.sphere_measured.copy(), explorer._view.sphere_fit.copy()
+    rendered = explorer.render()
+    state = explorer.state
+    assert state["spheres"] == "Mitsuba" and "Mitsuba" in explorer._info["spheres"]
+    for name in ("sphere_measured", "sphere_fit"):
+        assert state["images"][name] != preview["images"][name], name
+    c = (np.arange(128) + 0.5) * (2.0 / 128) - 1.0
+    x, y = np.meshgrid(c, -c)
+    inner = x * x + y * y < 0.9**2
+    for mine, theirs in zip(previews, rendered):
+        d = (mine - theirs)[inner]
+        assert np.sqrt(np.mean(d**2)) < 0.01 * np.sqrt(np.mean(theirs[inner] ** 2))
+    explorer.exposure = 1.0  # the renders stay under another exposure...
+    assert explorer.state["spheres"] == "Mitsuba"
+    explorer.set_params(alpha=0.2)  # ...and give way to the preview on a change of the view
+    assert explorer.state["spheres"] == "preview"

@@ -228,4 +228,6 @@ def test_explorer_in_jupyterlab(lab, page):
         if readme_copy:
             from PIL import Image
 
-            Image.open(shot).convert("RGB").quantize(256).save(REPO / readme_copy, optimize=True)
+            # 256 colours (fast octree: it keeps the channels' red, green and blue, median cut did not)
+            Image.open(shot).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(REPO / readme_copy,
+                                                                                                  optimize=True)

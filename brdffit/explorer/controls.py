@@ -12,7 +12,6 @@ A parameter with one value per channel has a slider per channel ("kd R", "kd G",
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -122,7 +121,3 @@ def as_lists(params: dict) -> dict[str, list[float]]:
 
 def same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
-
-
-def finite_or_none(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None

@@ -143,7 +143,7 @@ class Explorer(anywidget.AnyWidget):
             raise UsageError(f"exposure must be a finite number of stops, got {stops!r}")
         with self._update():
             self._exposure = stops
-        self._refresh()
+        self._refresh(keep_spheres=True)
 
     def fit(self, **options):
         """``brdffit.fit`` from the parameters shown (``init=``), with ``options``; the parameters
@@ -312,7 +312,7 @@ class Explorer(anywidget.AnyWidget):
         elif change.name == "_light":
             with self._update():
                 self._light = list(checked_light(change.new))
-        self._refresh(light=change.name == "_light")
+        self._refresh(light=change.name == "_light", keep_spheres=change.name == "_exposure")
 
     def _on_action(self, _widget, content, _buffers) -> None:
         """A button of the front end: {"action": name, ...}."""
