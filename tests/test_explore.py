@@ -244,6 +244,8 @@ def test_the_front_end_s_changes_and_actions(explorer, tmp_path):
     assert 'type="roughplastic"' in target.read_text()
     explorer._on_action(explorer, {"action": "export", "path": str(target)}, [])
     assert explorer._info["error"] and "exists" in explorer._info["message"]
+    explorer._on_action(explorer, {"action": "undo"}, [])
+    assert explorer._info["error"] and explorer._info["message"] == "undo: unknown action 'undo'"
 
 
 def test_compare_shows_error_against_run_time(explorer):

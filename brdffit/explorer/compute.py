@@ -51,11 +51,11 @@ class Table:
 
 def metrics(table: Table, loss: str, f: np.ndarray) -> dict[str, float]:
     """The fit's ``loss`` and :data:`SHOWN_METRICS` of model values ``f`` (6561, C) on the table."""
-    used = table.prepared.used[:, None]
-    f_used = np.where(used, f, 0.0)  # samples a fit leaves out enter nothing, whatever f is there
+    # Samples a fit leaves out have weight 0 in ``data``: they enter no sum (f is finite at every
+    # table direction, all above the horizon: the models' contract, brdffit.models.base.Model).
     data = table.prepared.data
-    program, _ = compiled(("explorer_metrics", loss), lambda: lambda f, d: values_metrics(f, d, (loss,)), f_used, data)
-    return {k: float(v) for k, v in program(f_used, data).items() if k == loss or k in SHOWN_METRICS}
+    program, _ = compiled(("explorer_metrics", loss), lambda: lambda f, d: values_metrics(f, d, (loss,)), f, data)
+    return {k: float(v) for k, v in program(f, data).items() if k == loss or k in SHOWN_METRICS}
 
 
 def view(table: Table, model: Model, params: dict, lit: Lighting, *, loss: str, status: str,

@@ -331,6 +331,8 @@ class Explorer(anywidget.AnyWidget):
             elif action == "light_row":
                 theta, phi = ubo_angles_deg()[int(content["row"])]
                 self.light = (theta, phi)
+            else:  # a front end of another version
+                raise UsageError(f"unknown action {action!r}")
         except (UsageError, InputError) as exc:
             self._message = (f"{action}: {exc}", True)
             self._refresh(keep_spheres=True)
