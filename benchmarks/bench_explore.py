@@ -49,12 +49,14 @@ def bench_model(m, name: str, changes: int, rng) -> None:
     e = brdffit.explore(m, model=name)
     for _ in range(3):  # warm: the model's programs, the slices' figure
         e.set_params(**random_values(e, rng))
-    total, parts = [], {"evaluate": [], "metrics": [], "images": []}
+    total, parts, images = [], {"evaluate": [], "metrics": [], "images": []}, {}
     for _ in range(changes):
         values = random_values(e, rng)
         total.append(timed(lambda: e.set_params(**values)))
         for k in parts:
             parts[k].append(e.timings[k])
+        for k, seconds in e._live.seconds.items():
+            images.setdefault(k, []).append(seconds)
     wi, wo = brdffit.ubo_pairs()
     floor = statistics.median(timed(lambda: eval_model(e._mdl, e.params, wi, wo)) for _ in range(changes))
     fit = brdffit.fit(m, name)
@@ -69,6 +71,8 @@ def bench_model(m, name: str, changes: int, rng) -> None:
           f"(target <= 100 ms median: {'met' if med <= 0.1 else 'NOT met'})")
     print("  where it goes (median ms): " + ", ".join(f"{k} {1e3 * statistics.median(v):.1f}" for k, v in parts.items())
           + f"; images sent {sum(len(v) for v in e._images.values()) / 1024:.0f} KiB base64")
+    print("  the images (median ms, made and encoded; the measured ones are kept): "
+          + ", ".join(f"{k} {1e3 * statistics.median(v):.1f}" for k, v in images.items()))
     print(f"  baselines: the model alone on the 81x81 table {1e3 * floor:.1f} ms (x{med / floor:.1f} of it); "
           f"the static figures redrawn {1e3 * static:.0f} ms (the explorer x{static / med:.0f} faster)")
     lights = [(15, 60), (60, 200), (30, 0), (75, 345), (45, 120)]

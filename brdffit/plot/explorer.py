@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import io
+import time
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -161,20 +162,28 @@ class LiveImages:
         self.measured_png = rgb_png(table_rgb(measured, valid, self.lo, self.hi))
         self._slices: _LiveSlices | None = None
         self._sphere: tuple | None = None  # (radiance, scale, PNG) of the measured sphere
+        self.seconds: dict[str, float] = {}
 
     def images(self, view: ExplorerView) -> dict[str, bytes]:
+        """The images of ``view``; :attr:`seconds` then holds what each took (made and encoded)."""
         if self._slices is None:
             self._slices = _LiveSlices(view.geometry, view.curves, view.measured.shape[-1])
         if self._sphere is None or self._sphere[0] is not view.sphere_measured or self._sphere[1] != view.scale:
             self._sphere = (view.sphere_measured, view.scale, rgb_png(sphere_rgb(view.sphere_measured, view.scale)))
-        return {
-            "measured": self.measured_png,
-            "fitted": rgb_png(table_rgb(view.fitted, view.valid, self.lo, self.hi)),
-            "log_ratio": rgb_png(residual_rgb(view.residual)),
-            "slices": rgb_png(self._slices.rgb(view.geometry, view.curves)),
-            "sphere_measured": self._sphere[2],
-            "sphere_fit": rgb_png(sphere_rgb(view.sphere_fit, view.scale)),
+        makers = {
+            "measured": lambda: self.measured_png,
+            "fitted": lambda: rgb_png(table_rgb(view.fitted, view.valid, self.lo, self.hi)),
+            "log_ratio": lambda: rgb_png(residual_rgb(view.residual)),
+            "slices": lambda: rgb_png(self._slices.rgb(view.geometry, view.curves)),
+            "sphere_measured": lambda: self._sphere[2],
+            "sphere_fit": lambda: rgb_png(sphere_rgb(view.sphere_fit, view.scale)),
         }
+        out, self.seconds = {}, {}
+        for name, make in makers.items():
+            t = time.perf_counter()
+            out[name] = make()
+            self.seconds[name] = time.perf_counter() - t
+        return out
 
 
 # -- the static figure ------------------------------------------------------------------------------
