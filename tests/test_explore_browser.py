@@ -81,8 +81,9 @@ def lab(tmp_path_factory):
     (root / ".config" / "labconfig").mkdir(parents=True)
     (root / ".config" / "labconfig" / "page_config.json").write_text(
         json.dumps({"disabledExtensions": {"@jupyterlab/apputils-extension:announcements": True}}))
-    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(root / ".config"), "JUPYTER_RUNTIME_DIR": str(root / ".runtime"),
-           "JUPYTER_PLATFORM_DIRS": "1"}
+    # the user's own Jupyter folders left out (a kernel spec of theirs named python3 would win)
+    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(root / ".config"), "JUPYTER_DATA_DIR": str(root / ".data"),
+           "JUPYTER_RUNTIME_DIR": str(root / ".runtime"), "JUPYTER_PLATFORM_DIRS": "1"}
     port = _free_port()
     log = open(root / "lab.log", "w")
     server = subprocess.Popen(
@@ -169,6 +170,7 @@ def evidence(page, lab: Lab):
         raise
 
 
+@pytest.mark.slow
 def test_explorer_in_jupyterlab(lab, page):
     with evidence(page, lab):
         page.goto(f"{lab.url}/lab/tree/explore.ipynb?token={TOKEN}")
