@@ -11,7 +11,6 @@ import click
 def export_maps_cmd(params_exr: str, out: str | None, to: str | None, bsdf_id: str | None, force: bool) -> int:
     from ..btf.maps import ParameterMaps
     from ..errors import UsageError
-    from ..materials.textured import checked_maps
 
     if out is None:
         raise UsageError(f"{params_exr}: parameter maps export to a file with their textures: give -o FILE "
@@ -20,17 +19,16 @@ def export_maps_cmd(params_exr: str, out: str | None, to: str | None, bsdf_id: s
     if to is not None and "".join(to.split()).lower() != maps.model:
         raise UsageError(f"--to {to}: parameter maps are not converted ({params_exr} holds {maps.model} maps); "
                          f"fit the BTF with --model {to} instead")
-    checked_maps(maps, out, source=params_exr)  # the format and the maps, before anything else
     if bsdf_id is None:
         stem = Path(params_exr).resolve().parent.name if Path(params_exr).stem == "params" else Path(params_exr).stem
         bsdf_id = "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in stem) or "brdffit"
         if bsdf_id[0].isdigit():
             bsdf_id = "m_" + bsdf_id
+    written = maps.export(out, bsdf_id=bsdf_id, force=force, source=params_exr)
     missed = int(maps.converged.size - maps.converged.sum())
     if missed:
         click.echo(f"brdffit: {params_exr}: the fit did not converge at {missed} of {maps.converged.size} texels "
-                   "(exported anyway)", err=True)
-    written = maps.export(out, bsdf_id=bsdf_id, force=force, source=params_exr)
+                   "(exported all the same)", err=True)
     h, w = maps.shape
     extra = f" and {written[0]}/" if len(written) > 1 else ""
     click.echo(f"wrote {out}{extra}: {maps.model} maps, {h} x {w} texels as textures, id {bsdf_id!r}", err=True)
