@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import click
@@ -20,10 +21,9 @@ def export_maps_cmd(params_exr: str, out: str | None, to: str | None, bsdf_id: s
         raise UsageError(f"--to {to}: parameter maps are not converted ({params_exr} holds {maps.model} maps); "
                          f"fit the BTF with --model {to} instead")
     if bsdf_id is None:
-        stem = Path(params_exr).resolve().parent.name if Path(params_exr).stem == "params" else Path(params_exr).stem
-        bsdf_id = "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in stem) or "brdffit"
-        if bsdf_id[0].isdigit():
-            bsdf_id = "m_" + bsdf_id
+        path = Path(params_exr)  # fit-btf's OUT/params.exr is named after OUT, as `export` names fit.json
+        stem = path.resolve().parent.name if path.stem == "params" and path.resolve().parent.name else path.stem
+        bsdf_id = re.sub(r"[^A-Za-z0-9_]", "_", stem) or "brdffit"
     written = maps.export(out, bsdf_id=bsdf_id, force=force, source=params_exr)
     missed = int(maps.converged.size - maps.converged.sum())
     if missed:

@@ -44,18 +44,6 @@ from ..errors import InputError, UsageError
 FORMAT_MODELS = {".xml": ("mitsuba:roughconductor", "mitsuba:roughplastic", "mitsuba:principled"),
                  ".glb": ("gltf:metallic_roughness",), ".gltf": ("gltf:metallic_roughness",),
                  ".blend": ("blender:principled",)}
-#: A map whose texels all lie within this relative spread of its largest value is one number.
-UNIFORM_RTOL = 1e-6
-
-
-def uniform_value(a: np.ndarray) -> np.ndarray | None:
-    """The value of a map (H, W, size) whose texels all hold one value (within float32
-    precision, :data:`UNIFORM_RTOL`), else None."""
-    a = np.asarray(a, np.float64)
-    spread = a.max(axis=(0, 1)) - a.min(axis=(0, 1))
-    if np.all(spread <= UNIFORM_RTOL * np.abs(a).max(axis=(0, 1))):
-        return a.mean(axis=(0, 1))
-    return None
 
 
 def textures_folder(path: str | os.PathLike) -> Path:
@@ -82,18 +70,20 @@ def checked_maps(maps, path: str | os.PathLike, source=None) -> tuple[str, objec
                          f"export as {', '.join(sorted(FORMAT_MODELS))}")
     model = models.get(maps.model)
     if not model.is_native:
+        natives = ", ".join(dict.fromkeys(m for held in FORMAT_MODELS.values() for m in held))
         raise UsageError(f"{path}: {model.name} is not a native model, so its maps have no material file: fit the "
-                         f"BTF with a native model ({', '.join(dict.fromkeys(m for ms in FORMAT_MODELS.values() for m in ms))}); "
-                         "brdffit.mitsuba_bsdf(maps.model, maps.params) renders these in Mitsuba, inside "
-                         "brdffit.evaluated_calls()")
+                         f"BTF with a native model ({natives}); brdffit.mitsuba_bsdf(maps.model, maps.params) "
+                         "renders these in Mitsuba, inside brdffit.evaluated_calls()")
     if model.name not in FORMAT_MODELS[ext]:
-        held = [e for e, ms in FORMAT_MODELS.items() if model.name in ms]
+        formats = [e for e, held in FORMAT_MODELS.items() if model.name in held]
         raise UsageError(f"{path}: a textured {ext} file holds {' or '.join(FORMAT_MODELS[ext])} maps, and these are "
-                         f"{model.name} maps: export them as {' or '.join(held)} (maps are not converted)")
+                         f"{model.name} maps: export them as {' or '.join(formats)} (maps are not converted)")
     shape = tuple(maps.shape)
     arrays = {}
     for p in model.params:
-        a = np.asarray(maps.params.get(p.name), np.float64)
+        if p.name not in maps.params:
+            raise InputError(source, f"no map for parameter {p.name!r} of {model.name}")
+        a = np.asarray(maps.params[p.name], np.float64)
         size = model.size(p)
         if a.shape == shape:
             a = a[..., None]
@@ -104,8 +94,8 @@ def checked_maps(maps, path: str | os.PathLike, source=None) -> tuple[str, objec
         bad = ~np.isfinite(v) | (v < lo) | (v > hi)
         if bad.any():
             r, c, _ = np.argwhere(bad)[0]
-            raise InputError(source, f"cannot export: map {p.name!r} at texel (row {r}, column {c}) is "
-                                     f"{a[r, c].tolist()}, outside [{p.lower:g}, {p.upper:g}], the range the renderer accepts")
+            raise InputError(source, f"cannot export: map {p.name!r} at texel (row {r}, column {c}) is {a[r, c].tolist()}, "
+                                     f"outside [{p.lower:g}, {p.upper:g}], the range the renderer accepts")
         arrays[p.name] = a
     return ext, model, arrays
 
@@ -128,7 +118,9 @@ def export_maps(maps, path: str | os.PathLike, *, bsdf_id: str | None = None, fo
 
     ext, model, arrays = checked_maps(maps, path, source)
     if bsdf_id is None:
-        bsdf_id = re.sub(r"[^A-Za-z0-9_]", "_", Path(path).stem) or "brdffit"
+        from . import default_id
+
+        bsdf_id = default_id(path)
     elif not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", bsdf_id):
         raise UsageError(f"--id {bsdf_id!r}: use letters, digits and '_' (Mitsuba ids cannot hold '.')")
     if ext == ".xml":
@@ -161,16 +153,3 @@ def export_maps(maps, path: str | os.PathLike, *, bsdf_id: str | None = None, fo
             with atomic_file(path, force=force, suffix=ext) as tmp:
                 Path(tmp).write_bytes(data)
     return targets
-
-
-def write_exr(path: str | os.PathLike, a: np.ndarray) -> None:
-    """A texture as a 32-bit float OpenEXR: (H, W, 3) as ``R,G,B``, (H, W, 1) or (H, W) as ``Y``,
-    row 0 the top row (increasing-Y line order, OpenEXR's default)."""
-    import OpenEXR
-
-    a = np.asarray(a, np.float32)
-    channels = {"RGB": np.ascontiguousarray(a)} if a.ndim == 3 and a.shape[-1] == 3 else {
-        "Y": np.ascontiguousarray(a.reshape(a.shape[:2]))}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, channels) as f:
-        f.write(str(path))

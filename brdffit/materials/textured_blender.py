@@ -36,7 +36,7 @@ COLOUR_SOCKETS = ("Base Color", "Specular Tint")
 def blend_bytes(model, arrays: dict[str, np.ndarray], name: str, extras: dict) -> bytes:
     """The contents of the .blend file of ``arrays`` (the maps of ``model``, blender:principled)."""
     from .. import cycles
-    from .textured import write_exr
+    from .textures import write_exr
 
     if set(SOCKETS) != set(model.param_names):  # the table above follows the model's parameters
         raise RuntimeError(f"{model.name}: parameters {model.param_names} differ from the sockets table {list(SOCKETS)}")

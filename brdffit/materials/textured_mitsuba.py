@@ -50,7 +50,7 @@ def plan(model, arrays: dict[str, np.ndarray], folder: str, source=None) -> dict
     each varying map replaced by its ``bitmap`` texture (file ``folder/<name>.exr``); one
     ``InputError`` naming ``source`` and the parameter where the plugin takes a varying map as one
     number."""
-    from .textured import uniform_value
+    from .textures import uniform_value
 
     values, varying = {}, []
     for p in model.params:
@@ -74,7 +74,7 @@ def plan(model, arrays: dict[str, np.ndarray], folder: str, source=None) -> dict
 
 def write_textures(native: dict, arrays: dict[str, np.ndarray], folder: Path) -> None:
     """The OpenEXR file of every ``bitmap`` texture of ``native`` (:func:`plan`), written into ``folder``."""
-    from .textured import write_exr
+    from .textures import write_exr
 
     for name, value in native.items():
         if isinstance(value, dict) and value.get("type") == "bitmap":
@@ -87,8 +87,9 @@ def xml_text(native: dict, bsdf_id: str, model, extras: dict) -> str:
 
     about = extras["brdffit"]
     h, w = about["texels"]
+    source = f" from {about['source']}" if about["source"] else ""
     comment = (f"brdffit per-texel fit: {model.name} maps, {h} x {w} texels ({about['loss']} loss, "
-               f"{100 * about['converged_share']:.1f} % converged){' from ' + about['source'] if about['source'] else ''}. "
+               f"{100 * about['converged_share']:.1f} % converged){source}. "
                f"{model.citation}. Mitsuba 3's own {native['type']} plugin with bitmap textures: loads in any "
                "Mitsuba 3 (no brdffit needed); the texture files are named relative to this file's folder. Texel "
                "(row r, column c) covers u in [c/W, (c+1)/W), v in [r/H, (r+1)/H). Include it with "
