@@ -6,6 +6,7 @@ in one line."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
@@ -220,8 +221,6 @@ def test_glb_is_valid_and_its_textures_hold_the_maps_texel_by_texel(tmp_path):
         assert sampler["magFilter"] == 9728  # NEAREST: one texel per texel
         img = doc["images"][texture["source"]]
         assert img["mimeType"] == "image/png"
-        import io
-
         return np.asarray(Image.open(io.BytesIO(view_bytes(doc, blob, img["bufferView"]))).convert("RGB"), np.float64) / 255
 
     loaded = ParameterMaps.load(tmp_path / "params.exr")
@@ -292,7 +291,7 @@ def test_blend_renders_each_texel_in_cycles(blender, tmp_path):
 
 # -- bad input: one line, exit 2, nothing written ------------------------------------------------------
 
-def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
     ok = random_maps("mitsuba:roughconductor")
     ok.save_exr(tmp_path / "params.exr")
     ggx = random_maps("ggx")
@@ -311,21 +310,17 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         (["nothing.exr", "-o", "n.xml"], "no such file"),
     ]
     before = sorted(os.listdir(tmp_path))
-    cwd = os.getcwd()
-    os.chdir(tmp_path)
-    try:
-        for args, message in cases:
-            assert main(["export", *args]) == 2, args
-            err = capsys.readouterr().err.strip()
-            assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, (args, err)
-        assert sorted(os.listdir(tmp_path)) == before and (tmp_path / "taken.xml").read_text() == "mine"
-        (tmp_path / "taken_textures").mkdir()  # a textures folder of another export: also kept without --force
-        (tmp_path / "taken.xml").unlink()
-        assert main(["export", "params.exr", "-o", "taken.xml"]) == 2
-        assert "taken_textures: already exists" in capsys.readouterr().err
-        assert main(["export", "params.exr", "-o", "taken.xml", "--force"]) == 0
-        assert sorted(p.name for p in (tmp_path / "taken_textures").iterdir()) == ["alpha.exr", "eta.exr", "k.exr"]
-    finally:
-        os.chdir(cwd)
+    monkeypatch.chdir(tmp_path)
+    for args, message in cases:
+        assert main(["export", *args]) == 2, args
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, (args, err)
+    assert sorted(os.listdir(tmp_path)) == before and (tmp_path / "taken.xml").read_text() == "mine"
+    (tmp_path / "taken_textures").mkdir()  # a textures folder of another export: also kept without --force
+    (tmp_path / "taken.xml").unlink()
+    assert main(["export", "params.exr", "-o", "taken.xml"]) == 2
+    assert "taken_textures: already exists" in capsys.readouterr().err
+    assert main(["export", "params.exr", "-o", "taken.xml", "--force"]) == 0
+    assert sorted(p.name for p in (tmp_path / "taken_textures").iterdir()) == ["alpha.exr", "eta.exr", "k.exr"]
     with pytest.raises(UsageError, match="not a native model"):
         ggx.export(tmp_path / "g.glb")
