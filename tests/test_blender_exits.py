@@ -31,7 +31,7 @@ BLENDER_FIT = {"model": "blender:principled", "converged": True, "data_name": "p
 FAKE_WORKER = """#!/bin/sh
 mkdir -p "$TMPDIR/blender_fake"
 echo '{"ready": true, "blender": "fake"}'
-read request
+read request || exit 0  # end of input: the worker ends
 touch "$TMPDIR/blender_fake/working"
 case "$FAKE_BLENDER" in
   die) kill -9 $$ ;;
@@ -97,6 +97,17 @@ def test_a_worker_that_hangs_is_stopped_within_the_budget(fake_blender, tmp_path
     assert code == 2, err
     assert err.count("\n") == 1 and "did not answer 'blend' within 3 s" in err, err
     assert not out.exists() and list(tmp.iterdir()) == []  # the worker stopped, its folder removed
+
+
+def test_the_worker_runs_in_a_session_of_its_own(fake_blender):
+    """A terminal's Ctrl-C reaches brdffit only, which stops the worker before removing its folder:
+    a worker that died of the signal on its own could be seen ending (a second line) before brdffit
+    knew of the interrupt, and leave what Blender was writing."""
+    w = cycles.worker()
+    assert os.getsid(w._proc.pid) == w._proc.pid != os.getsid(0)
+    assert w.scratch.is_dir()
+    w.close()
+    assert not w.scratch.exists()
 
 
 def _terminal_sigint() -> None:  # a terminal's default SIGINT disposition (see test_output_safety)

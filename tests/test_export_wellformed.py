@@ -114,19 +114,30 @@ def test_a_hostile_id_is_refused_alike_by_the_cli_and_python(tmp_path, capsys, b
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.json"]
 
 
+def bsdf_id_of(path) -> str:
+    import xml.etree.ElementTree as ET
+
+    return ET.parse(path).getroot().find("bsdf").get("id")
+
+
 def test_ids_made_from_file_names_are_valid(tmp_path, capsys):
-    """Where the id is not the user's choice (the file's or the folder's name), it is made safe."""
-    for stem in ("2024 paint--v2", "-->", "1", "é"):
+    """Where the id is not the user's choice (the file's or the folder's name), it is made to follow
+    the rule the user's id is held to."""
+    from brdffit.materials import check_id
+
+    for stem, made, folder_made in (("2024 paint--v2", "m_2024_paint__v2", "m_2024_paint__v2_fit"),
+                                    ("-->", "___", "____fit"), ("1", "m_1", "m_1_fit"), ("é", "_", "__fit")):
         out = tmp_path / f"{stem}.xml"
         FitResult.from_dict(doc("ggx")).export(out)
         xml_ok(out.read_bytes())
+        assert bsdf_id_of(out) == made and check_id(made) == made
         folder = tmp_path / f"{stem} fit"
         folder.mkdir()
         (folder / "fit.json").write_text(json.dumps(doc("mitsuba:roughplastic")))
         capsys.readouterr()
-        assert main(["export", str(folder / "fit.json"), "-o", str(folder / "m.mtlx")]) == 2  # (needs --to)
         assert main(["export", str(folder / "fit.json"), "-o", str(folder / "m.xml")]) == 0
         xml_ok((folder / "m.xml").read_bytes())
+        assert bsdf_id_of(folder / "m.xml") == folder_made  # fit.json: its folder's name
 
 
 def test_non_finite_metrics_never_reach_a_file_as_bare_nan(tmp_path, capsys):
