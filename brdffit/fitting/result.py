@@ -179,7 +179,9 @@ class FitResult:
                force: bool = False) -> "FitResult":
         """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
         ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
-        fit is converted first; returns the fit written."""
+        fit is converted first; returns the fit written. ``bsdf_id`` is held to the CLI's ``--id`` rule
+        (letters, digits, '_', not starting with a digit; else UsageError); default: the file's name
+        made so."""
         return provider("fit_export")(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id,
                                       force=force)
 
