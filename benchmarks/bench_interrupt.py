@@ -76,8 +76,16 @@ def main() -> int:
     ap.add_argument("--source", default=str(ROOT / "data" / "sample_ubo81.exr"))
     ap.add_argument("--blend", action="store_true", help="interrupt `brdffit export FIT.json -o x.blend` instead")
     args = ap.parse_args()
+    fit_dir = Path(tempfile.mkdtemp(prefix="brdffit-int-fit-"))
+    try:
+        return sweep(args, fit_dir)
+    finally:
+        shutil.rmtree(fit_dir, ignore_errors=True)
+
+
+def sweep(args, fit_dir: Path) -> int:
     if args.blend:
-        fit_json = Path(tempfile.mkdtemp(prefix="brdffit-int-fit-")) / "fit.json"
+        fit_json = fit_dir / "fit.json"
         fit_json.write_text(json.dumps(BLENDER_FIT))
         argv_of, result = (lambda out: ["export", str(fit_json), "-o", str(out / "x.blend")]), ["out/x.blend"]
     else:
