@@ -6,6 +6,7 @@ worker that cannot read the BTF fails the run with one line naming it, and the C
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import sys
 from pathlib import Path
@@ -23,20 +24,31 @@ from brdffit.btf import cluster as btf_cluster  # noqa: E402
 from brdffit.btf import generate as gen  # noqa: E402
 from brdffit.btf import tile as btf_tile  # noqa: E402
 from brdffit.cli import main  # noqa: E402
+from brdffit.errors import BrdffitWarning  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from btf_helpers import kill_worker  # noqa: E402
+from btf_helpers import dask_workers  # noqa: E402
 
 # the plugin travels by value: the workers need not import this test folder
-cloudpickle.register_pickle_by_value(kill_worker)
+cloudpickle.register_pickle_by_value(dask_workers)
 
 
 @pytest.fixture(scope="module")
 def client():
-    """Two worker processes of one thread each (a tile's fit uses the process's cores itself)."""
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as c:
-        yield c
+    """Two worker processes of one thread each (a tile's fit uses the process's cores itself), without
+    MALLOC_TRIM_THRESHOLD_ (brdffit.btf.cluster.TRIM). Dask's nanny writes its workers' environment
+    into this process's os.environ: put back as it was, for the tests that start processes later."""
+    import dask
+
+    saved = dict(os.environ)
+    try:
+        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{btf_cluster.TRIM}": None}), \
+                LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+                Client(cluster) as c:
+            yield c
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
 
 
 def _btf(tmp_path_factory, model: str, size: int, seed: int) -> Path:
@@ -101,11 +113,11 @@ def test_a_killed_worker_s_tile_runs_again_and_the_run_completes(client, lambert
     """SIGKILL of the worker that runs tile 4: when it starts the tile ("executing"), or when the
     tile is fitted and its file written but the result not yet reported ("memory")."""
     marker, out = tmp_path / "killed", tmp_path / "fit"
-    client.register_plugin(kill_worker.KillAt(4, state, str(marker), str(out / "tiles" / "tile_00004.npz")))
+    client.register_plugin(dask_workers.KillAt(4, state, str(marker), str(out / "tiles" / "tile_00004.npz")))
     try:
         maps = brdffit.fit_btf(lambert_btf, "lambert", progress=False, client=client, out=out)
     finally:
-        client.unregister_worker_plugin(kill_worker.KillAt.name)
+        client.unregister_worker_plugin(dask_workers.KillAt.name)
     killed, written = (int(x) for x in marker.read_text().split())  # a worker did die
     assert written == (state == "memory")  # mid-tile: nothing written yet; after: the file was there
     _assert_same_maps(maps, lambert_local)  # nothing lost, nothing mixed up
@@ -155,6 +167,33 @@ def test_a_worker_that_cannot_read_the_btf_fails_the_run_with_one_line(client, l
         brdffit.fit_btf(lost, "lambert", progress=False, client=client, out=tmp_path / "fit")
     assert info.value.path == str(tmp_path / "moved") and "\n" not in str(info.value)
     assert not (tmp_path / "fit" / "params.exr").exists()
+
+
+def test_workers_with_dask_s_malloc_trim_threshold_are_warned_about(client, lambert_btf):
+    import warnings
+
+    client.run(dask_workers.set_environ, btf_cluster.TRIM, "65536")  # what Dask's nanny sets by default
+    try:
+        with pytest.warns(BrdffitWarning, match="distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"):
+            brdffit.fit_btf(lambert_btf, "lambert", progress=False, client=client)
+    finally:
+        client.run(dask_workers.set_environ, btf_cluster.TRIM, None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BrdffitWarning)
+        brdffit.fit_btf(lambert_btf, "lambert", progress=False, client=client)
+
+
+def test_a_database_on_the_cluster(client, lambert_btf, lambert_local, tmp_path):
+    db = tmp_path / "db"
+    db.mkdir()
+    for name in ("a", "b"):
+        (db / name).symlink_to(lambert_btf.source)
+    result = brdffit.fit_btf_database(db, "lambert", out=tmp_path / "out", tile=4, client=client)
+    assert [r["material"] for r in result.rows] == ["a", "b"]
+    for name in ("a", "b"):
+        back = brdffit.ParameterMaps.load(tmp_path / "out" / name / "params.exr")
+        np.testing.assert_array_equal(back.params["kd"], lambert_local.params["kd"].astype(np.float32))
+        assert json.loads((tmp_path / "out" / name / "summary.json").read_text())["dask"]["workers"] >= 1
 
 
 def test_cli_scheduler(client, lambert_btf, lambert_local, tmp_path, capsys):

@@ -1,6 +1,7 @@
-"""A Dask worker plugin for tests/test_btf_cluster.py: the worker that reaches a chosen moment of a
-chosen tile's task ends its own process with SIGKILL, as a lost machine or the kernel's OOM killer
-would. Once per cluster: the first worker to get there creates ``marker`` and dies; the others,
+"""What tests/test_btf_cluster.py does to its Dask workers.
+
+:class:`KillAt`, a worker plugin: the worker that reaches a chosen moment of a chosen tile's task
+ends its own process with SIGKILL, as a lost machine or the kernel's OOM killer would. Once per cluster: the first worker to get there creates ``marker`` and dies; the others,
 and the worker the nanny starts in its place, go on. The marker holds the worker's pid and
 whether the file ``watch`` existed when it died."""
 
@@ -32,3 +33,11 @@ class KillAt(WorkerPlugin):
         os.write(fd, f"{os.getpid()} {int(os.path.exists(self.watch))}".encode())
         os.close(fd)
         os.kill(os.getpid(), signal.SIGKILL)
+
+
+def set_environ(name: str, value: str | None) -> None:
+    """Set (or, with None, remove) an environment variable of this worker process."""
+    if value is None:
+        os.environ.pop(name, None)
+    else:
+        os.environ[name] = value
