@@ -203,3 +203,13 @@ def test_ctrl_c_keeps_the_finished_materials_and_the_next_run_goes_on(database, 
     assert [r["status"] for r in rows] == ["done before", "fitted", "fitted"]
     for name, single in singles.items():
         _assert_written_maps(out / name, single)
+
+
+def test_the_bar_s_skip_takes_work_found_done_out_of_the_total():
+    from brdffit._progress import progress_bar
+
+    with progress_bar("texels", 100, rate="texels") as bar:
+        bar.skip(30)
+        bar.advance(10)
+        (task,) = bar._bar.tasks
+        assert (task.total, task.completed) == (70, 10)
