@@ -5,6 +5,7 @@ worker that cannot read the BTF fails the run with one line naming it, and the C
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import json
 import os
@@ -115,7 +116,13 @@ def test_a_killed_worker_s_tile_runs_again_and_the_run_completes(client, lambert
     marker, out = tmp_path / "killed", tmp_path / "fit"
     client.register_plugin(dask_workers.KillAt(4, state, str(marker), str(out / "tiles" / "tile_00004.npz")))
     try:
-        maps = brdffit.fit_btf(lambert_btf, "lambert", progress=False, client=client, out=out)
+        # a run that waits for ever (tasks bound to the dead worker) fails here instead of hanging
+        pool = concurrent.futures.ThreadPoolExecutor(1)
+        try:
+            maps = pool.submit(brdffit.fit_btf, lambert_btf, "lambert", progress=False, client=client,
+                               out=out).result(timeout=300)
+        finally:
+            pool.shutdown(wait=False)  # (such a run ends when the module's cluster is closed)
     finally:
         client.unregister_worker_plugin(dask_workers.KillAt.name)
     killed, written = (int(x) for x in marker.read_text().split())  # a worker did die
