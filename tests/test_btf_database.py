@@ -126,10 +126,11 @@ def test_an_interrupted_run_resumes_the_unfinished_material_with_one_bar(databas
         return real(b, t, *args)
 
     monkeypatch.setattr(btf_tile, "fit_tile", interrupted)
-    out = tmp_path / "out"
+    out, cache = tmp_path / "out", tmp_path / "cache"
     with pytest.raises(KeyboardInterrupt):
-        brdffit.fit_btf_database(database, "lambert", out=out, tile=4)
+        brdffit.fit_btf_database(database, "lambert", out=out, tile=4, cache_dir=cache)
     assert calls == [("cork", 0), ("felt", 0)]
+    assert len(list(cache.glob("*.f32"))) == 1  # felt's, for the next run; cork's went with its maps
     assert (out / "cork" / "params.exr").is_file() and not (out / "felt" / "params.exr").exists()
     assert sorted(p.name for p in (out / "felt" / "tiles").glob("tile_*")) == ["tile_00000.npz"]
     cork_written = (out / "cork" / "params.exr").stat().st_mtime_ns
@@ -142,8 +143,9 @@ def test_an_interrupted_run_resumes_the_unfinished_material_with_one_bar(databas
         return real(b, t, *args)
 
     monkeypatch.setattr(btf_tile, "fit_tile", counted)
-    result = brdffit.fit_btf_database(database, "lambert", out=out, tile=4)
+    result = brdffit.fit_btf_database(database, "lambert", out=out, tile=4, cache_dir=cache)
     assert calls == [("felt", 1), ("felt", 2), ("felt", 3), ("wool", 0), ("wool", 1)]
+    assert list(cache.iterdir()) == []
     assert (out / "cork" / "params.exr").stat().st_mtime_ns == cork_written
     assert [r["status"] for r in result.rows] == ["done before", "fitted", "fitted"]
     # the second run's bar: felt and wool's texels, felt's finished tile taken out of the total

@@ -16,7 +16,8 @@ What brdffit does on top:
   run: the maps equal a local run's bit for bit), writes ``DIR/tiles/tile_NNNNN.npz`` itself
   (atomically, only while ``DIR/tiles/run.json`` is still its run), and returns the arrays to the
   client, which assembles the maps from them. So ``DIR`` must be on a file system the workers share
-  with the client for the run to resume; the maps do not depend on it. A tile run twice (after its
+  with the client for the run to resume; the maps do not depend on it (a worker that does not see
+  ``DIR/tiles/run.json`` writes no tile file: the run completes, but cannot resume). A tile run twice (after its
   worker died) writes the same file twice with the same content: nothing is lost or duplicated.
 - How workers get the BTF. The task carries the BTF's description (source, read options, shape, the
   path of its tile-major cache file), not its values. A worker reads the cache file where it finds
@@ -59,7 +60,7 @@ from pathlib import Path
 from ..errors import BrdffitWarning, InputError, UsageError
 from . import run as _run
 from . import tile as _tile
-from .reader import BTF, N_PAIRS
+from .reader import BTF
 
 #: The cluster's event-log topic of the tile tasks.
 EVENTS = "brdffit-fit-btf"
@@ -157,7 +158,7 @@ def readable(btf: BTF) -> BTF:
         size = btf.cache.stat().st_size
     except OSError:
         size = -1
-    if size == btf.n_tiles * N_PAIRS * btf.tile * btf.tile * btf.channels * 4:
+    if size == btf.memory()["cache_file"]:
         return btf
     return _from_source(btf.source, btf.name, btf.signature(), _options_key(btf.meta.get("options", {})))
 

@@ -107,7 +107,8 @@ class DatabaseFit:
         """The rows as aligned text."""
         head = ("material", "texels", "texels/s", "median loss", "converged")
         body = [(r["material"], str(r["texels"]), "-" if r["texels_per_second"] is None else f"{r['texels_per_second']:.1f}",
-                 f"{r['median_loss']:.4g}", f"{100 * r['converged_share']:.1f} %") for r in self.rows]
+                 "-" if r["median_loss"] is None else f"{r['median_loss']:.4g}", f"{100 * r['converged_share']:.1f} %")
+                for r in self.rows]
         widths = [max(len(x[i]) for x in [head, *body]) for i in range(len(head))]
         lines = ["  ".join(c.ljust(wd) if i == 0 else c.rjust(wd) for i, (c, wd) in enumerate(zip(x, widths)))
                  for x in [head, *body]]
@@ -160,26 +161,44 @@ def fit_btf_database(
         shown = sys.stderr.isatty() if progress is None else bool(progress)
         with progress_bar(f"{record['model']} on {Path(folder).name}", sum(m.texels for m in left), shown=shown,
                           rate="texels") as bar:
+            plan = _Plan(out, model, loss, solver, neighbours, read, cache_dir, client, force, batch_options)
             for i, m in enumerate(left, 1):
-                where = f"{m.name} ({i}/{len(left)})"
-                bar.describe(f"reading {where}")
-                btf = load_btf(m.source, **read, cache_dir=cache_dir, name=m.name)
-                try:
-                    job = tile_job(btf, model, loss, solver, neighbours, **batch_options)
-                    with open_run(btf, job, out=out / m.name, force=force, client=client) as run:
-                        bar.skip(run.texels(run.results))
-                        bar.describe(f"{record['model']} on {where}")
-                        run.fit(bar)
-                finally:
-                    if cache_dir is not None:
-                        _remove_cache(btf)
-                    del btf
+                plan.fit(m, f"{m.name} ({i}/{len(left)})", bar)
                 # A finished material is a complete result: an interrupt from here on keeps it
                 # (the CLI's Ctrl-C removes only what this command committed and did not forget).
                 forget_committed()
         result = DatabaseFit(out, tuple(_row(out / m.name, m, m in left) for m in mats))
         _write_summary(result)
     return result
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    """How every material of a run is read and fitted, and where to."""
+
+    out: Path
+    model: object
+    loss: str
+    solver: str | None
+    neighbours: bool
+    read: dict
+    cache_dir: object
+    client: object
+    force: bool
+    options: dict
+
+    def fit(self, m: Material, where: str, bar) -> None:
+        """Read, fit and write material ``m``; its BTF (and a temporary cache) goes when this
+        returns, its cache in ``cache_dir`` once its maps are written."""
+        bar.describe(f"reading {where}")
+        btf = load_btf(m.source, **self.read, cache_dir=self.cache_dir, name=m.name)
+        job = tile_job(btf, self.model, self.loss, self.solver, self.neighbours, **self.options)
+        with open_run(btf, job, out=self.out / m.name, force=self.force, client=self.client) as run:
+            bar.skip(run.texels(run.results))
+            bar.describe(f"{job.model.name} on {where}")
+            run.fit(bar)
+        if self.cache_dir is not None:
+            _remove_cache(btf)
 
 
 def _row(folder: Path, m: Material, fitted_now: bool) -> dict:
