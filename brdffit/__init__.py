@@ -47,6 +47,8 @@ _LAZY = {
     "render_scene": "brdffit.scene",
     "validate_scene": "brdffit.scene",
     "Usage": "brdffit.scene",
+    "explore": "brdffit.explorer",
+    "Explorer": "brdffit.explorer",
 }
 # brdffit.plot is a module: `import brdffit.plot` or `brdffit.plot` after first use (lazy, below)
 

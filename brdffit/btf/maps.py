@@ -151,6 +151,16 @@ class ParameterMaps:
         files.append(self.save_exr(folder / "params.exr", force=force))
         return files
 
+    def export(self, path, *, bsdf_id: str | None = None, force: bool = False, source=None) -> list[Path]:
+        """The maps of a native model as the renderer's own material with every map a texture
+        (SPEC 7, 13), the extension picking the format: ``.xml`` Mitsuba 3 (textures in
+        ``<stem>_textures/`` beside it), ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender. Returns the
+        paths written; see :mod:`brdffit.materials.textured`."""
+        from ..materials.textured import export_maps
+
+        return export_maps(self, path, bsdf_id=bsdf_id, force=force,
+                           source=source if source is not None else self.info.get("file"))
+
     # display ------------------------------------------------------------------------------------
     def _repr_png_(self) -> bytes:
         from ..plot import parameter_maps, png_bytes

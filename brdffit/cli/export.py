@@ -11,7 +11,7 @@ from . import cli
 
 
 @cli.command("export")
-@click.argument("fit_json", metavar="FIT.json", type=click.Path(path_type=str))
+@click.argument("fit_json", metavar="FIT.json|PARAMS.exr", type=click.Path(path_type=str))
 @click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None,
               help="Material file to write; its extension picks the format: .xml (Mitsuba 3), .glb or .gltf "
                    "(glTF 2.0), .blend (Blender; needs .venv-blender), .mtlx (MaterialX 1.39) "
@@ -27,7 +27,12 @@ def export_cmd(fit_json: str, out: str | None, to: str | None, bsdf_id: str | No
     own plugin (plain Mitsuba loads it); any other fit in .xml is <bsdf type="brdffit"> (load the scene
     after `import brdffit; brdffit.register_mitsuba()`). A glTF file holds a gltf:metallic_roughness
     material on a UV sphere. Include an XML fragment in a scene with <include filename="FILE"/> and
-    refer to it with <ref id="ID"/>."""
+    refer to it with <ref id="ID"/>. A PARAMS.exr of fit-btf (maps of a native model) becomes the same
+    material with every map a texture, written beside FILE (Mitsuba) or inside it (glTF, Blender)."""
+    if Path(fit_json).suffix.lower() == ".exr":
+        from .export_maps import export_maps_cmd
+
+        return export_maps_cmd(fit_json, out, to, bsdf_id, force)
     from .._files import atomic_file, check_target
     from ..errors import InputError, UsageError
     from ..fitting.result import FitResult

@@ -235,6 +235,27 @@ def blend_file(material: dict, name: str, extras: dict) -> bytes:
         shutil.rmtree(out, ignore_errors=True)
 
 
+def blend_maps_file(material: dict, textures: dict, name: str, extras: dict, width: int, height: int) -> bytes:
+    """The bytes of a .blend file holding a square of width x height texels with ``material``, whose
+    inputs in ``textures`` ({socket: {"path", "name", "data", "scalar"}}: image files that Blender packs
+    into the file) are image textures (the worker's ``blend_maps``)."""
+    args = {"material": material, "textures": textures, "name": name, "extras": extras,
+            "width": int(width), "height": int(height)}
+    result, out = request("blend_maps", args)
+    try:
+        return (out / result["blend"]).read_bytes()
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
+def render_file(path: str | os.PathLike, light, irradiance: float = 1.0, spp: int = 4) -> np.ndarray:
+    """(H, W, 3) linear radiance of a .blend file rendered by Cycles through its own camera, direct
+    light only, its one sun turned towards ``light`` (a unit world direction) with ``irradiance``."""
+    args = {"path": str(Path(path).resolve()), "light": _dirs(light, "light")[0].tolist(),
+            "irradiance": float(irradiance), "spp": int(spp)}
+    return _load("render_file", args, "image")
+
+
 def inspect(path: str | os.PathLike) -> dict:
     """The Principled BSDF materials Blender reads from a .blend file, or imports from a glTF file with
     its own importer: {name: {"distribution", "inputs", "properties", "users"}}."""
