@@ -44,6 +44,7 @@ _LAZY = {
     "BTF": "brdffit.btf",
     "load_btf": "brdffit.btf",
     "fit_btf": "brdffit.btf",
+    "fit_btf_database": "brdffit.btf",
     "ParameterMaps": "brdffit.btf",
     "validate_btf": "brdffit.btf",
     "BTFValidation": "brdffit.btf",
