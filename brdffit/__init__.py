@@ -14,7 +14,6 @@ if _interrupt.is_the_executable():  # the `brdffit` command: Ctrl-C from its fir
 
 import importlib  # noqa: E402
 
-from . import _wiring  # noqa: F401,E402 - what the higher layers provide to the lower ones (brdffit/_providers.py)
 from .errors import InputError, UsageError  # noqa: E402
 from .grid import ubo_angles, ubo_directions, ubo_pairs  # noqa: E402
 

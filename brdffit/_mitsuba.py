@@ -4,7 +4,10 @@ Mitsuba's LLVM back end needs libLLVM >= 16; with 14 or 15 alone it *aborts the 
 ("Cannot select ... fmaximum") on the first kernel using max/min. Dr.Jit reads the library
 path from ``DRJIT_LIBLLVM_PATH`` when it is imported, so this module must run before any
 ``import drjit``. Without a usable libLLVM we fall back to ``scalar_rgb`` with one warning.
-Modules that render import Mitsuba through :func:`mitsuba` and nowhere else.
+Modules that render import Mitsuba through :func:`mitsuba` and nowhere else; :func:`eval_bsdf`
+is the one way brdffit evaluates a Mitsuba BSDF outside a render (the RGL reader's ``measured``
+plugin, the validation's reference table). This module imports no other part of brdffit: it stands
+in the lowest layer, so that the reader (io) can import it.
 """
 
 from __future__ import annotations
@@ -15,6 +18,12 @@ import os
 import re
 import sys
 import warnings
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
+    from jaxtyping import Float
 
 MIN_LLVM = 16
 _LIB_GLOBS = (
@@ -168,3 +177,36 @@ def render(scene, **kwargs):
     mi = user_mitsuba()
     with evaluated_calls():
         return mi.render(scene, **kwargs)
+
+
+def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
+    """f_r(wi = light, wo = view) of any Mitsuba BSDF at local directions, in 1/sr (cosine removed).
+
+    This is how a ``measured`` RGL file is read (:mod:`brdffit.io.rgl`) and how a reference is
+    evaluated outside a render (the 81x81 table panel, the closed-form agreement test), in the
+    order Mitsuba renders it (SPEC 3).
+    """
+    mi = mitsuba()
+    wi = np.asarray(wi, np.float64).reshape(-1, 3)
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    n = wi.shape[0]
+    if mi.variant().startswith("scalar"):
+        out = np.zeros((n, 3))
+        ctx = mi.BSDFContext()
+        for k in range(n):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wo[k])
+            si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+            v = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
+            out[k] = np.array([v[0], v[1], v[2]], np.float64)
+    else:
+        import drjit as dr
+
+        si = dr.zeros(mi.SurfaceInteraction3f, n)  # every field defined, at the batch's width
+        si.wi = mi.Vector3f(*(mi.Float(wo[:, c].astype(np.float32)) for c in range(3)))
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+        with evaluated_calls():
+            v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(mi.Float(wi[:, c].astype(np.float32)) for c in range(3))))
+        out = np.stack([np.asarray(v[c], np.float64) for c in range(3)], -1).reshape(n, 3)
+    cos_l = wi[:, 2:3]
+    return np.where(cos_l > 0, out / np.where(cos_l > 0, cos_l, 1.0), 0.0)

@@ -67,7 +67,7 @@ MUTATIONS = (
              'doc="specular scale", physical=(0.0, 1.0)', 'doc="specular scale", physical=(0.0, 10.0)',
              ("tests/test_models_doc_tables.py", "tests/test_models_registry.py")),
     Mutation("eval_bsdf (the RGL reader, the validation's reference table) keeps Mitsuba's cosine",
-             "brdffit/render/evaluate.py",
+             "brdffit/_mitsuba.py",
              "return np.where(cos_l > 0, out / np.where(cos_l > 0, cos_l, 1.0), 0.0)",
              "return np.where(cos_l > 0, out, 0.0)", ("tests/test_mitsuba_conventions.py", "tests/test_io_rgl.py")),
     Mutation("the rendered BSDF's eval without the light's cosine", "brdffit/render/bsdf.py",

@@ -14,6 +14,7 @@ import pytest
 from brdffit.cli import main
 from brdffit.errors import UsageError
 from brdffit.fitting.result import FitResult
+from brdffit.materials import export
 
 FITS = {
     "ggx": {"kd": [0.2, 0.3, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.3], "f0": [0.1]},
@@ -76,7 +77,7 @@ def check_file(path, ext: str) -> dict:
 @pytest.mark.parametrize("model,ext", TEXT_EXPORTS, ids=[f"{m}{e}" for m, e in TEXT_EXPORTS])
 def test_any_data_name_gives_a_valid_file_through_python(tmp_path, name, model, ext):
     fit = FitResult.from_dict(doc(model, data_name=name))
-    fit.export(tmp_path / f"paint{ext}")
+    export(fit, tmp_path / f"paint{ext}")
     extras = check_file(tmp_path / f"paint{ext}", ext)
     if extras:
         assert extras["data_name"].replace("\ufffd", "") == name.replace("\ud800", "")
@@ -101,8 +102,8 @@ def test_a_hostile_id_is_refused_alike_by_the_cli_and_python(tmp_path, capsys, b
     fit = FitResult.from_dict(doc("ggx"))
     for ext in (".xml", ".mtlx"):
         with pytest.raises(UsageError) as info:
-            (fit if ext == ".xml" else FitResult.from_dict(doc("gltf:metallic_roughness"))).export(
-                tmp_path / f"m{ext}", bsdf_id=bsdf_id)
+            export(fit if ext == ".xml" else FitResult.from_dict(doc("gltf:metallic_roughness")),
+                   tmp_path / f"m{ext}", bsdf_id=bsdf_id)
         assert "\n" not in str(info.value) and "letters, digits and '_'" in str(info.value)
     src = tmp_path / "fit.json"
     src.write_text(json.dumps(doc("ggx")))
@@ -128,7 +129,7 @@ def test_ids_made_from_file_names_are_valid(tmp_path, capsys):
     for stem, made, folder_made in (("2024 paint--v2", "m_2024_paint__v2", "m_2024_paint__v2_fit"),
                                     ("-->", "___", "____fit"), ("1", "m_1", "m_1_fit"), ("é", "_", "__fit")):
         out = tmp_path / f"{stem}.xml"
-        FitResult.from_dict(doc("ggx")).export(out)
+        export(FitResult.from_dict(doc("ggx")), out)
         xml_ok(out.read_bytes())
         assert bsdf_id_of(out) == made and check_id(made) == made
         folder = tmp_path / f"{stem} fit"
@@ -152,7 +153,7 @@ def test_non_finite_metrics_never_reach_a_file_as_bare_nan(tmp_path, capsys):
         assert main(["export", str(src), "-o", str(tmp_path / f"m{ext}")]) == 0, capsys.readouterr().err
         extras = check_file(tmp_path / f"m{ext}", ext)
         assert extras["metrics"]["log_rmse"] == 0.1 and extras["metrics"].get("rel_rmse") is None
-        FitResult.from_json(src).export(tmp_path / f"api{ext}")
+        export(FitResult.from_json(src), tmp_path / f"api{ext}")
         check_file(tmp_path / f"api{ext}", ext)
     fit = FitResult.from_json(src)
     again = strict_json(fit.to_json())
@@ -164,7 +165,7 @@ def test_non_finite_metrics_never_reach_a_file_as_bare_nan(tmp_path, capsys):
 def test_a_blend_file_records_strict_json(blender, tmp_path):
     fit = FitResult.from_dict(doc("blender:principled", data_name="paint---v2\x01",
                                   metrics={"rel_rmse": float("nan"), "log_rmse": 0.2}))
-    fit.export(tmp_path / "m.blend")
+    export(fit, tmp_path / "m.blend")
     ((name, mat),) = blender.inspect(tmp_path / "m.blend").items()
     recorded = strict_json(mat["properties"]["brdffit"])["brdffit"]
     assert name == "m" and recorded["metrics"] == {"rel_rmse": None, "log_rmse": 0.2}

@@ -152,7 +152,6 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
     """Should a file Mitsuba's plugin refuses get past our checks (here a two-entry 'jacobian', with
     the check bypassed), the refusal is an InputError naming the file, carrying Mitsuba's own message
     with its whitespace collapsed to single spaces (one line) and cut to 300 characters."""
-    from brdffit import _providers
     from brdffit._mitsuba import mitsuba
     from brdffit.io import rgl
     from brdffit.render.measured import load_measured
@@ -175,7 +174,7 @@ def test_rgl_mitsuba_plugin_refusal_is_a_one_line_input_error(tmp_path, monkeypa
     def failing(path, light, view):
         raise RuntimeError("drjit:\n  evaluation   failed " + "x" * 400)
 
-    monkeypatch.setitem(_providers._PROVIDERS, "rgl_eval", failing)  # what rgl.read evaluates with
+    monkeypatch.setattr(rgl, "eval_measured", failing)  # what rgl.read evaluates with
     with pytest.raises(InputError) as info:
         rgl.read(path)
     said = ("drjit: evaluation failed " + "x" * 400)[:300]

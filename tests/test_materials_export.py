@@ -16,6 +16,7 @@ import pytest
 from brdffit.cli import main
 from brdffit.errors import InputError, UsageError
 from brdffit.fitting.result import FitResult
+from brdffit.materials import convert, export
 
 PLASTIC = {"diffuse_reflectance": [0.3, 0.2, 0.1], "alpha": 0.2, "int_ior": 1.5,
            "specular_reflectance": [1.0, 1.0, 1.0]}
@@ -79,7 +80,7 @@ def test_native_xml_renders_in_plain_mitsuba_like_brdffit(tmp_path, model, param
     from brdffit.render import render_sphere
 
     fit = a_fit(model, params)
-    fit.export(tmp_path / "paint.xml")
+    export(fit, tmp_path / "paint.xml")
     text = (tmp_path / "paint.xml").read_text()
     kind = model.split(":")[1]
     assert f'<bsdf type="{kind}" id="paint">' in text and "brdffit\"" not in text
@@ -136,7 +137,7 @@ def accessor(doc, blob, index, dtype, width):
 
 def test_glb_holds_the_factors_on_an_outward_sphere(tmp_path):
     fit = a_fit("gltf:metallic_roughness", GLTF)
-    fit.export(tmp_path / "ball.glb")
+    export(fit, tmp_path / "ball.glb")
     doc, blob = read_glb((tmp_path / "ball.glb").read_bytes())
     assert doc["asset"]["version"] == "2.0"
     (material,) = doc["materials"]
@@ -164,7 +165,7 @@ def test_glb_holds_the_factors_on_an_outward_sphere(tmp_path):
 def test_gltf_json_embeds_its_buffer(tmp_path):
     import pygltflib
 
-    a_fit("gltf:metallic_roughness", GLTF).export(tmp_path / "ball.gltf")
+    export(a_fit("gltf:metallic_roughness", GLTF), tmp_path / "ball.gltf")
     doc = json.loads((tmp_path / "ball.gltf").read_text())
     assert doc["buffers"][0]["uri"].startswith("data:application/octet-stream;base64,")
     back = pygltflib.GLTF2().load(str(tmp_path / "ball.gltf"))
@@ -179,7 +180,7 @@ def test_convert_reports_its_error_against_the_source(source, params):
     from brdffit.grid import ubo_pairs
 
     fit = a_fit(source, params)
-    out = fit.convert("gltf:metallic_roughness")
+    out = convert(fit, "gltf:metallic_roughness")
     assert out.model.name == "gltf:metallic_roughness"
     c = out.options["converted_from"]
     assert c["model"] == source and c["grid"] == "ubo81"
@@ -190,7 +191,7 @@ def test_convert_reports_its_error_against_the_source(source, params):
     log = np.sqrt(np.mean((np.log1p(f * wi[:, 2:3]) - np.log1p(g * wi[:, 2:3])) ** 2))
     assert c["log_rmse"] == pytest.approx(log, rel=1e-6)
     assert c["rel_rmse"] == pytest.approx(rel, rel=1e-6)
-    assert fit.convert(source) is fit  # nothing to convert
+    assert convert(fit, source) is fit  # nothing to convert
 
 
 def test_cli_export_to_prints_and_stores_the_conversion_error(tmp_path, capsys):
@@ -256,7 +257,7 @@ def test_export_writes_a_blend_file(blender, tmp_path):
     Blender reads it back, carries the fitted inputs."""
     params = {"base_color": [0.7, 0.3, 0.1], "metallic": 0.2, "roughness": 0.35, "ior": 1.5, "specular_tint": 1.0}
     fit = a_fit("blender:principled", params)
-    fit.export(tmp_path / "paint.blend")
+    export(fit, tmp_path / "paint.blend")
     (name, mat), = blender.inspect(tmp_path / "paint.blend").items()
     assert name == "paint"
     for key, value in fit.model.native(fit.params)["inputs"].items():
@@ -266,13 +267,13 @@ def test_export_writes_a_blend_file(blender, tmp_path):
 
 def test_python_export_refusals(tmp_path):
     with pytest.raises(UsageError, match="convert it with --to gltf:metallic_roughness"):
-        a_fit("ggx", GGX).export(tmp_path / "x.glb")
+        export(a_fit("ggx", GGX), tmp_path / "x.glb")
     import dataclasses
 
     fit = a_fit("mitsuba:roughplastic", PLASTIC)  # a fit file with such values is refused on reading
     bad = dataclasses.replace(fit, params={**fit.params, "alpha": np.array([-1.0])})
     with pytest.raises(InputError, match="cannot export: .*'alpha' = \\[-1.0\\] outside \\[1e-4, 1\\]"):
-        bad.export(tmp_path / "x.xml")
+        export(bad, tmp_path / "x.xml")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -283,7 +284,7 @@ def test_a_scene_including_an_export_loads_for_scene_tools(tmp_path, model, para
     plugin as well as a native one, is found by its id (it used to be 'Plugin "brdffit" not found')."""
     from brdffit.scene.load import load_scene
 
-    a_fit(model, params).export(tmp_path / "paint.xml")
+    export(a_fit(model, params), tmp_path / "paint.xml")
     (tmp_path / "scene.xml").write_text(user_scene_xml("paint.xml", [0.0, 0.0, 1.0], 8))
     loaded = load_scene(tmp_path / "scene.xml", "paint")
     assert len(loaded.shapes) == 1 and loaded.original.id() == "paint"

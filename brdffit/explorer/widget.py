@@ -173,13 +173,14 @@ class Explorer(anywidget.AnyWidget):
         return self.report
 
     def export(self, path, to=None, *, force: bool = False):
-        """Write the fit shown as a material file (``FitResult.export``: the extension picks the
+        """Write the fit shown as a material file (:func:`brdffit.materials.export`: the extension picks the
         format; ``to`` converts to a native model first, the conversion error is shown). Needs the
         parameters shown to be a fit's: after moving a slider, fit first."""
         if self.result is None or not controls.same(controls.checked(self._mdl, self.result.params), self.params):
             raise UsageError("the parameters shown are not a fit's result: Fit first, then Export")
-        written = self.result.export(path, to=to, force=force)
-        from ..materials import conversion_line
+        from ..materials import conversion_line, export
+
+        written = export(self.result, path, to=to, force=force)
 
         line = conversion_line(written)
         self._message = (f"exported {written.model.name} to {path}" + (f"; {line}" if line else ""), False)

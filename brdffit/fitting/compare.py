@@ -11,7 +11,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .._providers import provider
 from ..measurement import Measurement
 from .._progress import progress_bar
 from .api import fit
@@ -81,8 +80,9 @@ class Report:
 
     def plot(self, metric: str = "loss_log"):
         """:func:`brdffit.plot.pareto` of this report (a matplotlib Figure)."""
-        # figures are a higher layer: brdffit/_providers.py
-        return provider("report_plot")(self, metric)
+        from ..plot import pareto
+
+        return pareto(self, metric)
 
     def __repr__(self) -> str:
         best = min(self.rows, key=lambda r: r["loss_log"], default=None)
@@ -90,7 +90,9 @@ class Report:
         return f"Report({self.data_name!r}: {len(self.rows)} rows{tail})"
 
     def _repr_png_(self) -> bytes:
-        return provider("figure_png")(self.plot())
+        from ..plot import png_bytes
+
+        return png_bytes(self.plot())
 
     def _repr_html_(self) -> str:
         import base64

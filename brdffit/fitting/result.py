@@ -1,4 +1,14 @@
-"""`FitResult` (SPEC 5): what a fit found, how well, how fast, and whether it converged."""
+"""`FitResult` (SPEC 5): what a fit found, how well, how fast, and whether it converged.
+
+A FitResult is data: its fields, its JSON (``to_json`` / ``from_json``) and ``eval`` (the fitted
+model's f_r). What other layers do with a fit are their functions: :func:`brdffit.materials.export`
+and :func:`brdffit.materials.convert` (material files, native models), :func:`brdffit.mitsuba_bsdf`
+(a Mitsuba BSDF), :mod:`brdffit.plot` (figures). Two thin doors stay on the class, each importing
+what it calls where the import checks see it: ``to_mitsuba`` (the renderer) and ``_repr_png_``
+(Jupyter's figure), which is why this module's layer stands above the renderers and the figures
+(``[tool.importlinter]`` in pyproject.toml). ``convert`` and ``export`` cannot be such doors: they
+run a fit, and the fit driver makes FitResults, so the import would close a circle.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +20,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._fit_defaults import STATUS_TEXT
-from .._providers import provider
 from ..errors import InputError
 from ..models.base import Model
 from .fitfile import METRIC_ALIASES, check_fit_document, parse_fit_text
@@ -137,8 +146,9 @@ class FitResult:
     # -- Jupyter --------------------------------------------------------------------------------------
     def _repr_png_(self) -> bytes:
         """The fitted model on the UBO-81 grid (:func:`brdffit.plot.table`)."""
-        # figures, renderers and material files are higher layers: brdffit/_providers.py
-        return provider("fit_png")(self)
+        from ..plot import png_bytes, table
+
+        return png_bytes(table(self))
 
     def _repr_html_(self) -> str:
         import base64
@@ -164,26 +174,12 @@ class FitResult:
         )
 
     def to_mitsuba(self) -> dict:
-        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (SPEC 8): for
-        a ``mitsuba:*`` fit Mitsuba's own plugin (``model.native``), otherwise the ``brdffit`` plugin
-        with the same JAX formula (see :mod:`brdffit.render.export`)."""
-        return provider("fit_to_mitsuba")(self)
+        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (SPEC 8):
+        :func:`brdffit.mitsuba_bsdf` of this fit (for a ``mitsuba:*`` fit Mitsuba's own plugin,
+        otherwise the ``brdffit`` plugin with the same JAX formula)."""
+        from ..render.export import mitsuba_bsdf
 
-    def convert(self, model: str | Model, **options) -> "FitResult":
-        """This fit as ``model`` (a native model: ``mitsuba:roughplastic``, ``gltf:metallic_roughness``,
-        ...): ``model`` fitted to this fit's BRDF on the UBO-81 grid, the conversion error in
-        ``options["converted_from"]`` (SPEC 13; :func:`brdffit.materials.convert`)."""
-        return provider("fit_convert")(self, model, **options)
-
-    def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
-               force: bool = False) -> "FitResult":
-        """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
-        ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
-        fit is converted first; returns the fit written. ``bsdf_id`` is held to the CLI's ``--id`` rule
-        (letters, digits, '_', not starting with a digit; else UsageError); default: the file's name
-        made so."""
-        return provider("fit_export")(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id,
-                                      force=force)
+        return mitsuba_bsdf(self)
 
     # -- JSON -------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

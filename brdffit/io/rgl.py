@@ -1,8 +1,8 @@
 """RGL-EPFL material database files (Dupuy & Jakob 2018), Mitsuba ``tensor_file`` ``.bsdf``.
 
 The data are evaluated through Mitsuba's own ``measured`` plugin, exactly as the authors intended,
-in the order Mitsuba renders them (SPEC 3; :func:`brdffit.render.measured.eval_measured`: the
-plugin belongs to the renderer layer, which provides it here as ``rgl_eval``, brdffit/_providers.py)::
+in the order Mitsuba renders them (SPEC 3; :func:`eval_measured`, through the lowest Mitsuba layer,
+:mod:`brdffit._mitsuba`, which imports Mitsuba when a file is first read)::
 
     f_r(light, view) = eval(si.wi = view, wo = light) / cos(theta_light)
 
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .._files import read_input
-from .._providers import provider
+from .._mitsuba import eval_bsdf, mitsuba
 from ..errors import InputError
 from ..measurement import Measurement
 from ._common import query_directions, sampled
@@ -166,13 +166,31 @@ def _product(shape: tuple[int, ...]) -> int:
     return out
 
 
+def load_measured(path: str | Path):
+    """Mitsuba's ``measured`` BSDF for an RGL file, verified first (the one door to the plugin)."""
+    path = Path(path)
+    check_tensor_file(path)
+    mi = mitsuba()
+    try:
+        return mi.load_dict({"type": "measured", "filename": str(path)})
+    except Exception as exc:  # noqa: BLE001 - Mitsuba's own parse errors become one line
+        raise InputError(path, f"Mitsuba's measured plugin cannot read it: {' '.join(str(exc).split())[:300]}") from None
+
+
+def eval_measured(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """f_r(light, view), (N, 3): Mitsuba's ``measured`` plugin evaluated for all pairs at once by
+    :func:`brdffit._mitsuba.eval_bsdf`, the one way brdffit evaluates a Mitsuba BSDF outside a render
+    (the validation's reference table is evaluated the same way)."""
+    return eval_bsdf(load_measured(path), light, view)
+
+
 def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:
     """Sample an RGL ``.bsdf`` at ``wi`` (light), ``wo`` (view): the UBO-81 pairs by default."""
     path = Path(path)
     light, view, grid = query_directions(wi, wo)
     fields = check_tensor_file(path)
     try:
-        f = provider("rgl_eval")(path, light, view)
+        f = eval_measured(path, light, view)
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - Mitsuba's own parse errors become one line

@@ -9,8 +9,8 @@
   :mod:`brdffit.cycles`; needs ``.venv-blender``), ``.mtlx`` a MaterialX 1.39 document (``gltf_pbr``
   for a glTF fit, ``open_pbr_surface`` for a Blender fit).
 
-``FitResult.convert`` / ``FitResult.export`` and ``brdffit export FIT.json [--to MODEL] -o FILE`` are
-thin surfaces over these two functions.
+``brdffit export FIT.json [--to MODEL] -o FILE`` and the explorer's Export are thin surfaces over
+these two functions.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def check_format(fit, path: str | os.PathLike, to: str | None = None, source=Non
     if needed is not None and "".join(str(name).split()).lower() not in needed:
         held = " or ".join(needed)
         raise UsageError(f"{path}: a {FORMATS[ext]} file holds a {held} material, and this fit is "
-                         f"{name}: convert it with --to {needed[0]} (FitResult.export(path, to={needed[0]!r}))")
+                         f"{name}: convert it with --to {needed[0]} (brdffit.materials.export(fit, path, to={needed[0]!r}))")
     if to is None and fit.model.is_native:
         native_of(fit, source)  # parameters outside what the renderer accepts: refused before any work
     return ext

@@ -32,7 +32,7 @@ def cycles_material(src) -> dict:
                          "(a validation renders its reference with Mitsuba)")
     if src.model.name != CYCLES_MODEL:
         raise UsageError(f"renderer 'cycles' renders {CYCLES_MODEL} fits, and this fit is {src.model.name}: "
-                         f"convert it first (FitResult.convert({CYCLES_MODEL!r}), or fit with --model {CYCLES_MODEL})")
+                         f"convert it first (brdffit.materials.convert(fit, {CYCLES_MODEL!r}), or fit with --model {CYCLES_MODEL})")
     try:
         return src.model.native({k: np.asarray(v) for k, v in src.params.items()})
     except ValueError as exc:
