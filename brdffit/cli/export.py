@@ -7,14 +7,16 @@ from pathlib import Path
 import click
 
 from . import cli
+from ._help import HelpFrom
+
+_FORMATS = "brdffit.materials.formats:help_text", "brdffit.materials.formats:maps_help_text"
 
 
 @cli.command("export")
 @click.argument("fit_json", metavar="FIT.json|PARAMS.exr", type=click.Path(path_type=str))
-@click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None,
-              help="Material file to write; its extension picks the format: .xml (Mitsuba 3), .glb or .gltf "
-                   "(glTF 2.0), .blend (Blender; needs .venv-blender), .mtlx (MaterialX 1.39) "
-                   "[default: Mitsuba XML on standard output].")
+@click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None, cls=HelpFrom, help_from=_FORMATS,
+              help="Material file to write; its extension picks the format: {} [default: Mitsuba XML on standard "
+                   "output]. Parameter maps (PARAMS.exr): {}.")
 @click.option("--to", "to", default=None, metavar="MODEL",
               help="Convert the fit to this native model first (e.g. mitsuba:roughplastic, gltf:metallic_roughness): "
                    "fitted to the fit's BRDF on the UBO-81 grid; the conversion error is printed and stored in the file.")
@@ -22,12 +24,13 @@ from . import cli
               help="The material's id (Mitsuba: <ref id=...>; glTF: its name) [default: the file name of FIT.json's folder].")
 @click.option("--force", is_flag=True, help="Replace an existing FILE.")
 def export_cmd(fit_json: str, out: str | None, to: str | None, bsdf_id: str | None, force: bool) -> int:
-    """Write the fit in FIT.json as a material other programs load. A mitsuba:* fit becomes Mitsuba's
-    own plugin (plain Mitsuba loads it); any other fit in .xml is <bsdf type="brdffit"> (load the scene
-    after `import brdffit; brdffit.register_mitsuba()`). A glTF file holds a gltf:metallic_roughness
-    material on a UV sphere. Include an XML fragment in a scene with <include filename="FILE"/> and
-    refer to it with <ref id="ID"/>. A PARAMS.exr of fit-btf (maps of a native model) becomes the same
-    material with every map a texture, written beside FILE (Mitsuba) or inside it (glTF, Blender)."""
+    """Write the fit in FIT.json as a material other programs load, in the format FILE's extension
+    names (-o). A native fit (a renderer's own model: `brdffit models`) becomes that renderer's own
+    material, which loads without brdffit; a format that holds only native models says which to
+    convert to (--to). Any other fit in Mitsuba XML is <bsdf type="brdffit"> (load the scene after
+    `import brdffit; brdffit.register_mitsuba()`). Include an XML fragment in a scene with
+    <include filename="FILE"/> and refer to it with <ref id="ID"/>. A PARAMS.exr of fit-btf (maps of
+    a native model) becomes the same material with every map a texture."""
     if Path(fit_json).suffix.lower() == ".exr":
         from .export_maps import export_maps_cmd
 

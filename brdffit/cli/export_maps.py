@@ -11,11 +11,11 @@ import click
 def export_maps_cmd(params_exr: str, out: str | None, to: str | None, bsdf_id: str | None, force: bool) -> int:
     from ..btf.maps import ParameterMaps
     from ..errors import UsageError
-    from ..materials import safe_id
+    from ..materials import formats, safe_id
 
     if out is None:
         raise UsageError(f"{params_exr}: parameter maps export to a file with their textures: give -o FILE "
-                         "(.xml Mitsuba 3, .glb/.gltf glTF 2.0, .blend Blender)")
+                         f"({formats.help_text(maps=True)})")
     maps = ParameterMaps.load(params_exr)
     if to is not None and "".join(to.split()).lower() != maps.model:
         raise UsageError(f"--to {to}: parameter maps are not converted ({params_exr} holds {maps.model} maps); "

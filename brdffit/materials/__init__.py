@@ -1,16 +1,20 @@
 """A fit as a material other programs load (SPEC 8, 13): conversion to a native model, export.
 
-- :func:`convert` fits a target model (a native one: ``mitsuba:*``, ``gltf:*``) to a fit's own
-  BRDF on the UBO-81 grid and records the conversion error.
-- :func:`export` writes a fit as a file whose extension picks the format: ``.xml`` a Mitsuba 3
-  scene-XML fragment (the renderer's own plugin for a ``mitsuba:*`` fit, the ``brdffit`` plugin of
-  SPEC 8 otherwise), ``.glb`` / ``.gltf`` a UV sphere carrying a ``gltf:*`` material, ``.blend`` a
-  sphere with a ``blender:principled`` material (written by Blender in the worker of
-  :mod:`brdffit.cycles`; needs ``.venv-blender``), ``.mtlx`` a MaterialX 1.39 document (``gltf_pbr``
-  for a glTF fit, ``open_pbr_surface`` for a Blender fit).
+- :func:`convert` fits a target model (a native one: ``mitsuba:*``, ``gltf:*``, ``blender:*``) to a
+  fit's own BRDF on the UBO-81 grid and records the conversion error.
+- :func:`export` writes a fit as a file whose extension picks the format. The formats are modules
+  of this package, each declaring its extensions, the models it holds and its writer
+  (:mod:`.formats`, the registry): ``.xml`` a Mitsuba 3 scene-XML fragment (:mod:`.mitsuba_xml`: the
+  renderer's own plugin for a ``mitsuba:*`` fit, the ``brdffit`` plugin of SPEC 8 otherwise),
+  ``.glb`` / ``.gltf`` a UV sphere carrying a ``gltf:*`` material (:mod:`.gltf`), ``.blend`` a sphere
+  with a ``blender:*`` material, written by Blender in the worker of :mod:`brdffit.cycles`
+  (:mod:`.blender`; needs ``.venv-blender``), ``.mtlx`` a MaterialX 1.39 document (:mod:`.materialx`:
+  ``gltf_pbr`` for a glTF fit, ``open_pbr_surface`` for a Blender fit). A BTF's parameter maps
+  export as textured materials of the same formats (:mod:`.textured`).
 
 ``brdffit export FIT.json [--to MODEL] -o FILE`` and the explorer's Export are thin surfaces over
-these two functions.
+these two functions. (They are not methods of ``FitResult``: converting runs a fit, and the fit
+driver makes FitResults, so a method here would tie the fitting layer to this one in a circle.)
 """
 
 from __future__ import annotations
@@ -22,18 +26,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from ._names import check_id, safe_id
+from . import formats
+from ._names import check_id, default_id, safe_id
+from ._record import conversion_line, converted_from, native_of
+
+__all__ = ["check_format", "check_id", "conversion_line", "convert", "converted_from", "default_id", "describe",
+           "export", "formats", "material_bytes", "native_of", "safe_id"]
 
 #: Metrics relative to the reference (SPEC 5): not a number against a reference that is 0 everywhere.
 RELATIVE_METRICS = ("rel_rmse", "mean_rel_error")
-
-#: File extension -> what it holds.
-FORMATS = {".xml": "Mitsuba 3 scene XML", ".glb": "glTF 2.0 binary", ".gltf": "glTF 2.0",
-           ".blend": "Blender", ".mtlx": "MaterialX 1.39"}
-#: The native models a format that needs one holds (the first is the one to convert to).
-FORMAT_MODELS = {".glb": ("gltf:metallic_roughness",), ".gltf": ("gltf:metallic_roughness",),
-                 ".blend": ("blender:principled",),
-                 ".mtlx": ("gltf:metallic_roughness", "blender:principled")}
 
 
 def convert(fit, model, *, loss: str | None = None, **fit_options):
@@ -78,130 +79,30 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
                                options={**converted.options, "converted_from": error})
 
 
-def converted_from(fit) -> dict | None:
-    """What a converted fit records of its conversion (``options["converted_from"]``), else None."""
-    c = fit.options.get("converted_from") if isinstance(fit.options, dict) else None
-    return c if isinstance(c, dict) and c else None
-
-
-def _value(x) -> str:
-    x = float("nan") if x is None else float(x)
-    return f"{x:.4g}" if np.isfinite(x) else "undefined"
-
-
-def conversion_line(fit) -> str | None:
-    """One line naming the conversion error of a converted fit, None for a fit that was not converted."""
-    c = converted_from(fit)
-    if c is None:
-        return None
-    line = (f"converted {c.get('model')} -> {fit.model.name}: rel_rmse {_value(c.get('rel_rmse'))}, "
-            f"log_rmse {_value(c.get('log_rmse'))} against the {c.get('model')} fit on the UBO-81 grid")
-    if _value(c.get("rel_rmse")) == "undefined":
-        line += f" (rel_rmse is relative to the {c.get('model')} fit, which is 0 everywhere)"
-    return line
-
-
-def _about(fit) -> str:
-    about = f"brdffit fit: {fit.model.name}"
-    if fit.data_name:
-        about += f" on {fit.data_name}"
-    if fit.converged is False:
-        about += " (the fit did not converge)"
-    line = conversion_line(fit)
-    return about + (f"; {line}" if line else "")
-
-
 def check_format(fit, path: str | os.PathLike, to: str | None = None, source=None) -> str:
-    """The extension of ``path`` if it can hold ``fit`` (converted to ``to`` when given); else one
-    ``UsageError`` line that says what would work. Called before any work. ``source`` (the fit
-    file, if any) is the file an error about the fit's parameters names."""
-    ext = Path(path).suffix.lower()
-    if ext not in FORMATS:
-        raise UsageError(f"{path}: unknown material format {ext or '(no extension)'!r}; "
-                         f"use one of {', '.join(sorted(FORMATS))}")
-    needed = FORMAT_MODELS.get(ext)
+    """The extension of ``path`` if its format (:mod:`.formats`) holds ``fit`` (converted to ``to``
+    when given); else one ``UsageError`` line that says what would work. Called before any work.
+    ``source`` (the fit file, if any) is the file an error about the fit's parameters names."""
+    fmt = formats.for_path(path)
     name = to if to is not None else fit.model.name
-    if needed is not None and "".join(str(name).split()).lower() not in needed:
-        held = " or ".join(needed)
-        raise UsageError(f"{path}: a {FORMATS[ext]} file holds a {held} material, and this fit is "
-                         f"{name}: convert it with --to {needed[0]} (brdffit.materials.export(fit, path, to={needed[0]!r}))")
+    if not fmt.holds("".join(str(name).split()).lower()):
+        held = fmt.held()
+        raise UsageError(f"{path}: a {fmt.name} file holds a {' or '.join(held)} material, and this fit is "
+                         f"{name}: convert it with --to {held[0]} (brdffit.materials.export(fit, path, to={held[0]!r}))")
     if to is None and fit.model.is_native:
         native_of(fit, source)  # parameters outside what the renderer accepts: refused before any work
-    return ext
-
-
-def native_of(fit, source=None) -> dict:
-    """``fit.model.native(fit.params)``, or one ``InputError`` naming the parameter the renderer refuses."""
-    from ..errors import InputError
-
-    try:
-        return fit.model.native(fit.params)
-    except ValueError as exc:
-        raise InputError(source, f"cannot export: {exc}") from None
-
-
-def _extras(fit) -> dict:
-    """What a material file records of the fit (glTF ``extras``, a Blender custom property, a MaterialX
-    attribute), as strict JSON: a converted fit's metrics are its error against the source fit, and
-    are named so (``metrics_against_source_fit``; the source fit's own, against its data, are in
-    ``converted_from.source_fit_metrics``)."""
-    from .._files import strict_json
-
-    about = {"model": fit.model.name, "data_name": fit.data_name, "loss": fit.loss, "converged": bool(fit.converged)}
-    conversion = converted_from(fit)
-    if conversion is None:
-        about["metrics"] = dict(fit.metrics)
-    else:
-        about["metrics_against_source_fit"] = dict(fit.metrics)
-        about["converted_from"] = conversion
-    return {"brdffit": strict_json(about)}
+    return Path(path).suffix.lower()
 
 
 def material_bytes(fit, ext: str, bsdf_id: str) -> bytes:
     """The contents of a material file of format ``ext`` for ``fit`` (checked by :func:`check_format`),
     the material called ``bsdf_id`` (:func:`check_id`)."""
-    bsdf_id = check_id(bsdf_id)
-    if ext == ".xml":
-        from .mitsuba_xml import native_xml, plugin_dict
-
-        if fit.model.target == "mitsuba":
-            native = native_of(fit)
-            how = (f"Mitsuba 3's own {native['type']} plugin: loads in any Mitsuba 3 (no brdffit needed); include"
-                   f' it with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>.')
-        else:
-            native = plugin_dict(fit)
-            how = ("Load it with `import brdffit; brdffit.register_mitsuba()` (after mi.set_variant), include it"
-                   f' with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>;'
-                   " render it like any scene.")
-        return native_xml(native, bsdf_id, f"{_about(fit)}. {fit.model.citation}. {how}").encode()
-    if ext == ".blend":
-        from .blender import blend_bytes
-
-        return blend_bytes(native_of(fit), bsdf_id, _extras(fit))
-    if ext == ".mtlx":
-        from .materialx import mtlx_text
-
-        return mtlx_text(fit.model.name, native_of(fit), bsdf_id, _extras(fit)).encode()
-    from .gltf import gltf_bytes
-
-    return gltf_bytes(native_of(fit), bsdf_id, binary=ext == ".glb", extras=_extras(fit))
+    return formats.of_extension(ext).write(fit, ext, check_id(bsdf_id))
 
 
 def describe(fit, ext: str) -> str:
     """What a material file of format ``ext`` holds for ``fit``, for the line that says it was written."""
-    if ext == ".xml":
-        return f"Mitsuba's own {fit.model.native(fit.params)['type']} plugin" if fit.model.target == "mitsuba" \
-            else '<bsdf type="brdffit">'
-    if ext == ".mtlx":
-        from .materialx import SHADERS
-
-        return f"a MaterialX 1.39 {SHADERS.get(fit.model.name, 'surface')} material"
-    return f"a UV sphere with the material ({FORMATS[ext]})"
-
-
-def default_id(path: str | os.PathLike) -> str:
-    """The material id of an export to ``path`` when none is given: its file name made safe."""
-    return safe_id(Path(path).stem)
+    return formats.of_extension(ext).describe(fit, ext)
 
 
 def export(fit, path: str | os.PathLike, *, to: str | None = None, bsdf_id: str | None = None,

@@ -10,7 +10,9 @@
 
 from __future__ import annotations
 
+import os
 import re
+from pathlib import Path
 
 from .._files import plain_text
 from ..errors import UsageError
@@ -39,3 +41,8 @@ def xml_comment(text: str) -> str:
     """``<!-- text -->`` for any ``text``: characters XML forbids replaced (``_files.plain_text``),
     runs of '-' shortened to one (a comment may not hold ``--`` nor end with ``-``)."""
     return "<!-- " + re.sub(r"-{2,}", "-", plain_text(text)) + " -->"
+
+
+def default_id(path: str | os.PathLike) -> str:
+    """The material id of an export to ``path`` when none is given: its file name made safe."""
+    return safe_id(Path(path).stem)

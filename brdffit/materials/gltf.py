@@ -1,4 +1,4 @@
-"""A ``gltf:*`` fit as a glTF 2.0 asset: a UV sphere carrying the material (SPEC 13).
+"""``.glb`` / ``.gltf`` (SPEC 13): a ``gltf:*`` fit as a glTF 2.0 asset, a UV sphere carrying the material.
 
 Written with pygltflib (the Khronos-listed Python library for glTF 2.0). The asset holds one scene,
 one node, one mesh of one triangle primitive (POSITION, NORMAL, TEXCOORD_0, TANGENT, indices) and
@@ -18,6 +18,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from .._files import plain_text, strict_json
+from ._record import fit_record, native_of
+from .formats import Format
 
 #: Rings and segments of the sphere: about 4k triangles, smooth in any viewer, 200 kB as .glb.
 RINGS, SEGMENTS = 48, 96
@@ -120,3 +122,13 @@ def gltf_bytes(material: Mapping, name: str, binary: bool, extras: Mapping | Non
         return b"".join(asset.save_to_bytes())
     asset.convert_buffers(g.BufferFormat.DATAURI)
     return asset.to_json(indent=2).encode()
+
+
+def _describe(fit, ext: str) -> str:
+    return f"a UV sphere with the material (glTF 2.0{' binary' if ext == '.glb' else ''})"
+
+
+#: Every ``gltf:*`` model: ``model.native`` is a glTF material object.
+FORMAT = Format("glTF 2.0", (".glb", ".gltf"),
+                lambda fit, ext, bsdf_id: gltf_bytes(native_of(fit), bsdf_id, binary=ext == ".glb", extras=fit_record(fit)),
+                _describe, target="gltf")

@@ -1,4 +1,4 @@
-"""``.mtlx`` export (SPEC 13): a fit as a MaterialX 1.39 document, through the ``materialx`` package.
+"""``.mtlx`` (SPEC 13): a fit as a MaterialX 1.39 document, through the ``materialx`` package.
 
 - ``gltf:metallic_roughness`` -> a ``gltf_pbr`` node (base_color, metallic, roughness: the glTF
   factors; the node's other inputs keep their defaults, the glTF core material's values).
@@ -19,17 +19,20 @@ from __future__ import annotations
 from .._files import json_text
 from ..errors import UsageError
 from ._names import safe_id
+from ._record import fit_record, native_of
+from .formats import Format
 
-SHADERS = {"gltf:metallic_roughness": "gltf_pbr", "blender:principled": "open_pbr_surface"}
+
+def _gltf_pbr(native: dict) -> dict:
+    """{input: (type, value)} of ``gltf_pbr`` from a glTF material object."""
+    pbr = native["pbrMetallicRoughness"]
+    return {"base_color": ("color3", [float(x) for x in pbr["baseColorFactor"][:3]]),
+            "metallic": ("float", float(pbr["metallicFactor"])),
+            "roughness": ("float", float(pbr["roughnessFactor"]))}
 
 
-def _inputs(model_name: str, native: dict) -> dict:
-    """{input: (type, value)} of the shading node."""
-    if model_name == "gltf:metallic_roughness":
-        pbr = native["pbrMetallicRoughness"]
-        return {"base_color": ("color3", [float(x) for x in pbr["baseColorFactor"][:3]]),
-                "metallic": ("float", float(pbr["metallicFactor"])),
-                "roughness": ("float", float(pbr["roughnessFactor"]))}
+def _open_pbr(native: dict) -> dict:
+    """{input: (type, value)} of ``open_pbr_surface`` from Blender's Principled BSDF settings."""
     inputs = native["inputs"]
     return {"base_color": ("color3", [float(x) for x in inputs["Base Color"][:3]]),
             "base_metalness": ("float", float(inputs.get("Metallic", 0.0))),
@@ -40,13 +43,24 @@ def _inputs(model_name: str, native: dict) -> dict:
             "specular_ior": ("float", float(inputs.get("IOR", 1.5)))}
 
 
+#: Native model -> the MaterialX shading node that holds it and that node's inputs from ``model.native``:
+#: the models a MaterialX file holds, in the order a message proposes them.
+NODES = {"gltf:metallic_roughness": ("gltf_pbr", _gltf_pbr), "blender:principled": ("open_pbr_surface", _open_pbr)}
+SHADERS = {model: node for model, (node, _) in NODES.items()}
+
+
+def _inputs(model_name: str, native: dict) -> dict:
+    """{input: (type, value)} of the shading node."""
+    return NODES[model_name][1](native)
+
+
 def mtlx_text(model_name: str, native: dict, name: str, extras: dict) -> str:
     """The MaterialX 1.39 document (XML text) of a native fit of ``model_name``."""
     import MaterialX as mx
 
     if model_name not in SHADERS:
         raise UsageError(f"a MaterialX file holds a {' or '.join(SHADERS)} material, and this fit is {model_name}: "
-                         "convert it with --to gltf:metallic_roughness or --to blender:principled")
+                         f"convert it with {' or '.join(f'--to {m}' for m in SHADERS)}")
     doc = mx.createDocument()
     material_name = safe_id(name)
     shader = doc.addNode(SHADERS[model_name], material_name + "_shader", "surfaceshader")
@@ -61,3 +75,8 @@ def mtlx_text(model_name: str, native: dict, name: str, extras: dict) -> str:
     about = extras.get("brdffit", extras) if isinstance(extras, dict) else {}
     material.setDocString(f"brdffit fit of {about.get('model', model_name)} as {SHADERS[model_name]}")
     return mx.writeToXmlString(doc)
+
+
+FORMAT = Format("MaterialX 1.39", (".mtlx",),
+                lambda fit, ext, bsdf_id: mtlx_text(fit.model.name, native_of(fit), bsdf_id, fit_record(fit)).encode(),
+                lambda fit, ext: f"a MaterialX 1.39 {SHADERS[fit.model.name]} material", models=tuple(NODES))

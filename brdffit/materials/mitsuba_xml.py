@@ -1,4 +1,4 @@
-"""A fit as a Mitsuba 3 scene-XML fragment: a plugin dictionary written as XML.
+"""``.xml`` (SPEC 8, 13): a fit as a Mitsuba 3 scene-XML fragment, a plugin dictionary written as XML.
 
 Mitsuba's XML and ``mi.load_dict`` describe the same objects: a plugin ``type`` and named
 properties. This writes the dictionary that ``mitsuba:*`` models return (the renderer's own
@@ -26,6 +26,8 @@ import numpy as np
 
 from .._files import plain_text
 from ._names import xml_comment
+from ._record import about, native_of
+from .formats import Format
 
 
 def _attr(value: str) -> str:
@@ -97,3 +99,28 @@ def plugin_dict(fit) -> dict:
             raise ValueError(f"{name}: {v.size} values")
         out[_key(name)] = float(v[0]) if v.size == 1 else {"type": "rgb", "value": [float(x) for x in v]}
     return out
+
+
+def xml_bytes(fit, ext: str, bsdf_id: str) -> bytes:
+    """The file of a fit: Mitsuba's own plugin for a ``mitsuba:*`` fit (plain Mitsuba loads it), the
+    ``brdffit`` plugin's properties for any other, with a comment that says how to use it."""
+    if fit.model.target == "mitsuba":
+        native = native_of(fit)
+        how = (f"Mitsuba 3's own {native['type']} plugin: loads in any Mitsuba 3 (no brdffit needed); include"
+               f' it with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>.')
+    else:
+        native = plugin_dict(fit)
+        how = ("Load it with `import brdffit; brdffit.register_mitsuba()` (after mi.set_variant), include it"
+               f' with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>;'
+               " render it like any scene.")
+    return native_xml(native, bsdf_id, f"{about(fit)}. {fit.model.citation}. {how}").encode()
+
+
+def _describe(fit, ext: str) -> str:
+    if fit.model.target == "mitsuba":
+        return f"Mitsuba's own {fit.model.native(fit.params)['type']} plugin"
+    return '<bsdf type="brdffit">'
+
+
+#: Any model: a ``mitsuba:*`` fit as Mitsuba's own plugin, any other as the ``brdffit`` plugin.
+FORMAT = Format("Mitsuba 3", (".xml",), xml_bytes, _describe)

@@ -2,7 +2,9 @@
 
 ``ParameterMaps.export(path)`` and ``brdffit export PARAMS.exr -o FILE`` write the maps of a native
 model as the renderer's own material, each parameter map a texture, so that the BTF renders in
-that renderer without brdffit. The extension picks the format, as for a single fit:
+that renderer without brdffit. The extension picks the format, as for a single fit: a module of
+this package that declares ``MAPS_FORMAT`` (:class:`brdffit.materials.formats.MapsFormat`: its
+extensions, the models whose maps it holds, its writer):
 
 - ``.xml``: Mitsuba 3's own plugin (``roughconductor``, ``roughplastic``, ``principled``) whose
   parameters are ``bitmap`` textures, 32-bit float OpenEXR files in the folder ``<stem>_textures``
@@ -38,46 +40,36 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, UsageError
-from ._names import check_id
-
-#: Extension -> the native models a textured file of that format holds.
-FORMAT_MODELS = {".xml": ("mitsuba:roughconductor", "mitsuba:roughplastic", "mitsuba:principled"),
-                 ".glb": ("gltf:metallic_roughness",), ".gltf": ("gltf:metallic_roughness",),
-                 ".blend": ("blender:principled",)}
-
-
-def textures_folder(path: str | os.PathLike) -> Path:
-    """The folder beside a Mitsuba XML that holds its texture files: ``<stem>_textures``."""
-    path = Path(path)
-    return path.with_name(path.stem + "_textures")
+from . import formats
+from ._names import check_id, default_id
+from .textures import textures_folder
 
 
 def outputs(path: str | os.PathLike) -> list[Path]:
-    """What an export to ``path`` writes: the file, and for ``.xml`` its textures folder first."""
+    """What an export to ``path`` writes: the file, and before it the folder of its textures where
+    its format writes texture files beside it."""
     path = Path(path)
-    return [textures_folder(path), path] if path.suffix.lower() == ".xml" else [path]
+    return [textures_folder(path), path] if formats.for_path(path, maps=True).textures else [path]
 
 
-def checked_maps(maps, path: str | os.PathLike, source=None) -> tuple[str, object, dict[str, np.ndarray]]:
-    """(extension, model, {parameter: (H, W, size) float64}) when ``maps`` can be written as ``path``;
+def checked_maps(maps, path: str | os.PathLike, source=None) -> tuple[formats.MapsFormat, object, dict[str, np.ndarray]]:
+    """(format, model, {parameter: (H, W, size) float64}) when ``maps`` can be written as ``path``;
     else one line: ``UsageError`` for a format that does not hold the model, ``InputError`` naming
     ``source`` (the params.exr, if any) for maps the renderer would refuse. Called before any work."""
     from .. import models
 
+    fmt = formats.for_path(path, maps=True)
     ext = Path(path).suffix.lower()
-    if ext not in FORMAT_MODELS:
-        raise UsageError(f"{path}: unknown textured material format {ext or '(no extension)'!r}; parameter maps "
-                         f"export as {', '.join(sorted(FORMAT_MODELS))}")
     model = models.get(maps.model)
     if not model.is_native:
-        natives = ", ".join(dict.fromkeys(m for held in FORMAT_MODELS.values() for m in held))
+        natives = ", ".join(dict.fromkeys(m for f in formats.formats(maps=True) for m in f.held()))
         raise UsageError(f"{path}: {model.name} is not a native model, so its maps have no material file: fit the "
                          f"BTF with a native model ({natives}); brdffit.mitsuba_bsdf(maps.model, maps.params) "
                          "renders these in Mitsuba, inside brdffit.evaluated_calls()")
-    if model.name not in FORMAT_MODELS[ext]:
-        formats = [e for e, held in FORMAT_MODELS.items() if model.name in held]
-        raise UsageError(f"{path}: a textured {ext} file holds {' or '.join(FORMAT_MODELS[ext])} maps, and these are "
-                         f"{model.name} maps: export them as {' or '.join(formats)} (maps are not converted)")
+    if not fmt.holds(model.name):
+        usable = [e for f in formats.formats(maps=True) if f.holds(model.name) for e in f.extensions]
+        raise UsageError(f"{path}: a textured {ext} file holds {' or '.join(fmt.held())} maps, and these are "
+                         f"{model.name} maps: export them as {' or '.join(usable)} (maps are not converted)")
     shape = tuple(maps.shape)
     arrays = {}
     for p in model.params:
@@ -97,7 +89,7 @@ def checked_maps(maps, path: str | os.PathLike, source=None) -> tuple[str, objec
             raise InputError(source, f"cannot export: map {p.name!r} at texel (row {r}, column {c}) is {a[r, c].tolist()}, "
                                      f"outside [{p.lower:g}, {p.upper:g}], the range the renderer accepts")
         arrays[p.name] = a
-    return ext, model, arrays
+    return fmt, model, arrays
 
 
 def extras(maps, model) -> dict:
@@ -113,44 +105,24 @@ def extras(maps, model) -> dict:
 def export_maps(maps, path: str | os.PathLike, *, bsdf_id: str | None = None, force: bool = False,
                 source=None) -> list[Path]:
     """Write ``maps`` as the textured material file ``path`` (see the module docstring); returns the
-    paths written (for ``.xml``: the textures folder, then the XML). Everything is checked before any
-    work; each output is written atomically, the XML last, so that its presence means a complete
-    result; an existing output is replaced only with ``force``."""
+    paths written (the textures folder first where there is one, then the file). Everything is
+    checked before any work; each output is written atomically, the file last, so that its presence
+    means a complete result; an existing output is replaced only with ``force``."""
     from .._files import atomic_dir, atomic_file, reserve
 
-    ext, model, arrays = checked_maps(maps, path, source)
-    if bsdf_id is None:
-        from . import default_id
-
-        bsdf_id = default_id(path)
-    bsdf_id = check_id(bsdf_id)  # the single-fit export's rule
-    if ext == ".xml":
-        from .textured_mitsuba import plan
-
-        native = plan(model, arrays, textures_folder(path).name, source)  # what Mitsuba cannot take: refused here
+    path = Path(path)
+    fmt, model, arrays = checked_maps(maps, path, source)
+    bsdf_id = check_id(default_id(path) if bsdf_id is None else bsdf_id)  # the single-fit export's rule
+    plan = fmt.plan(model, arrays, path, source) if fmt.plan else None  # what the renderer refuses: here
+    job = formats.MapsJob(model, arrays, path, bsdf_id, extras(maps, model), plan)
     targets = outputs(path)
-    about = extras(maps, model)
     with contextlib.ExitStack() as held:
-        for target in targets:  # checked and held, both, before any work
-            held.enter_context(reserve(target, force=force, folder=target != Path(path)))
-        if ext == ".xml":
-            from .textured_mitsuba import write_textures, xml_text
-
+        for target in targets:  # checked and held, all, before any work
+            held.enter_context(reserve(target, force=force, folder=target != path))
+        if fmt.textures:
             with atomic_dir(textures_folder(path), force=force) as tmp:
-                write_textures(native, arrays, Path(tmp))
-            text = xml_text(native, bsdf_id, model, about)
-            with atomic_file(path, force=force, suffix=".xml") as tmp:
-                Path(tmp).write_text(text, encoding="utf-8")
-        elif ext == ".blend":
-            from .textured_blender import blend_bytes
-
-            data = blend_bytes(model, arrays, bsdf_id, about)
-            with atomic_file(path, force=force, suffix=".blend") as tmp:
-                Path(tmp).write_bytes(data)
-        else:
-            from .textured_gltf import gltf_bytes
-
-            data = gltf_bytes(arrays, bsdf_id, binary=ext == ".glb", extras=about)
-            with atomic_file(path, force=force, suffix=ext) as tmp:
-                Path(tmp).write_bytes(data)
+                fmt.textures(job, Path(tmp))
+        data = fmt.write(job)
+        with atomic_file(path, force=force, suffix=path.suffix.lower()) as tmp:
+            Path(tmp).write_bytes(data)
     return targets

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .formats import MapsFormat
+
 #: Parameter of ``blender:principled`` -> the Principled BSDF input its map feeds.
 SOCKETS = {"base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR",
            "specular_tint": "Specular Tint"}
@@ -53,3 +55,8 @@ def blend_bytes(model, arrays: dict[str, np.ndarray], name: str, extras: dict) -
             textures[socket] = {"path": str(file), "name": f"{name}_{param}", "data": param != "base_color",
                                 "scalar": not colour}
         return cycles.blend_maps_file(model.native(means), textures, str(name), extras, width, height)
+
+
+#: The Principled BSDF: :data:`SOCKETS` names the inputs the maps feed.
+MAPS_FORMAT = MapsFormat("Blender", (".blend",), lambda job: blend_bytes(job.model, job.arrays, job.bsdf_id, job.extras),
+                         models=("blender:principled",), note="needs .venv-blender")

@@ -27,6 +27,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .formats import MapsFormat
+
 #: glTF sampler constants (the specification's WebGL enums).
 NEAREST, LINEAR_MIPMAP_LINEAR, REPEAT = 9728, 9987, 10497
 #: The red channel of the metallic-roughness texture (unused by the material; 255 = no occlusion).
@@ -140,3 +142,8 @@ def gltf_bytes(arrays: Mapping[str, np.ndarray], name: str, binary: bool, extras
         return b"".join(asset.save_to_bytes())
     asset.convert_buffers(g.BufferFormat.DATAURI)
     return asset.to_json(indent=2).encode()
+
+
+#: The metallic-roughness material: its textures hold base_color, metallic and roughness.
+MAPS_FORMAT = MapsFormat("glTF 2.0", (".glb", ".gltf"), lambda job: gltf_bytes(
+    job.arrays, job.bsdf_id, binary=job.path.suffix.lower() == ".glb", extras=job.extras), models=("gltf:metallic_roughness",))

@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .formats import MapsFormat
+from .textures import textures_folder
 
 #: Mitsuba 3.9.1: the properties of each plugin that are textures (see the module docstring).
 TEXTURED = {
@@ -61,7 +63,7 @@ def plan(model, arrays: dict[str, np.ndarray], folder: str, source=None) -> dict
         values[p.name] = np.clip(one, p.lower, p.upper)  # a float32 texel at a bound, read in float64
     native = model.native(values)
     for name in varying:
-        if name not in TEXTURED[native["type"]]:
+        if name not in TEXTURED.get(native["type"], ()):
             a = arrays[name]
             raise InputError(source, f"cannot export {model.name} maps to Mitsuba: {name} varies over the texels "
                                      f"({a.min():.4g} to {a.max():.4g}) and Mitsuba 3's {native['type']} plugin takes "
@@ -95,3 +97,14 @@ def xml_text(native: dict, bsdf_id: str, model, extras: dict) -> str:
                "(row r, column c) covers u in [c/W, (c+1)/W), v in [r/H, (r+1)/H). Include it with "
                f'<include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>.')
     return native_xml(native, bsdf_id, comment)
+
+
+def _plan(model, arrays: dict[str, np.ndarray], path: Path, source=None) -> dict:
+    return plan(model, arrays, textures_folder(path).name, source)
+
+
+#: Every ``mitsuba:*`` model: its plugin with the textures :data:`TEXTURED` lists (a plugin missing
+#: there takes every map as one number, and refuses a map that varies).
+MAPS_FORMAT = MapsFormat("Mitsuba 3", (".xml",), lambda job: xml_text(job.plan, job.bsdf_id, job.model, job.extras).encode(),
+                         target="mitsuba", plan=_plan, textures=lambda job, folder: write_textures(job.plan, job.arrays, folder),
+                         note="bitmap textures in <stem>_textures beside it")

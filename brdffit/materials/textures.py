@@ -7,8 +7,15 @@ and Blender's image textures are these files.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
+
+def textures_folder(path: str | os.PathLike) -> Path:
+    """The folder beside a material file that holds its texture files: ``<stem>_textures``."""
+    path = Path(path)
+    return path.with_name(path.stem + "_textures")
+
 
 #: A map whose texels all lie within this relative spread of its largest value is one number.
 UNIFORM_RTOL = 1e-6

@@ -1,6 +1,7 @@
 """The model library: ``names()``, ``get(name)``; one file per model (SPEC 4).
 
-A module in this package that defines ``MODEL`` is registered under ``MODEL.name``. Native models
+A module in this package that defines ``MODEL`` is registered under ``MODEL.name`` (``_registry``:
+adding a model is one file and its tests). Native models
 (SPEC 13) are named ``renderer:bsdf`` and live in ``renderer_bsdf.py`` (``mitsuba:roughplastic`` in
 ``mitsuba_roughplastic.py``).
 ``get`` also accepts sums ("lambert+ggx+ggx", see ``compose``: names are case-insensitive and
@@ -11,27 +12,12 @@ spaces are ignored) and multi-lobe Lafortune models (``get("lafortune", lobes=3)
 from __future__ import annotations
 
 import functools
-import importlib
-import pkgutil
 import re
 
 from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
+from ._registry import discover as _discover
+from ._registry import native_names
 from .base import Model, Param
-
-_REGISTRY: dict[str, Model] = {}
-_NOT_MODELS = ("base", "compose", "albedo")
-
-
-def _discover() -> dict[str, Model]:
-    if not _REGISTRY:
-        for info in pkgutil.iter_modules(__path__):
-            if info.name.startswith("_") or info.name in _NOT_MODELS:
-                continue
-            module = importlib.import_module(f"{__name__}.{info.name}")
-            model = getattr(module, "MODEL", None)
-            if isinstance(model, Model):
-                _REGISTRY[model.name] = model
-    return _REGISTRY
 
 
 def names() -> list[str]:
@@ -84,4 +70,4 @@ def get(name: str | Model, *, lobes: int | None = None) -> Model:
 
 # Sums of Model objects: ``brdffit.models.compose.compose([m1, m2])`` (a function of the same name
 # here would be shadowed by the submodule as soon as it is imported).
-__all__ = ["Model", "Param", "get", "names"]
+__all__ = ["Model", "Param", "get", "names", "native_names"]

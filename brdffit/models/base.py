@@ -300,8 +300,9 @@ class Model:
         ValueError for a model that is not native, or parameters outside the bounds (the ranges the
         renderer accepts)."""
         if self.to_native is None:
-            raise ValueError(f"model {self.name!r} is not a native model; native models: "
-                             "mitsuba:roughconductor, mitsuba:roughplastic, mitsuba:principled, gltf:metallic_roughness")
+            from ._registry import native_names
+
+            raise ValueError(f"model {self.name!r} is not a native model; native models: {', '.join(native_names())}")
         checked = {k: np.asarray(v, np.float64).reshape(-1) for k, v in self.check_params(params).items()}
         for p in self.params:
             v = checked[p.name]

@@ -1,4 +1,5 @@
-"""A fit in any Mitsuba 3 scene (SPEC 8): the ``brdffit`` BSDF plugin, its dict and its XML.
+"""A fit in any Mitsuba 3 scene (SPEC 8): the ``brdffit`` BSDF plugin and its dict (its XML file is
+written by :mod:`brdffit.materials.mitsuba_xml`, with every material format).
 
 The plugin is the symbolic BSDF of :mod:`brdffit.render.symbolic_bsdf`: ``eval`` is the JAX
 ``model.eval`` the fit was made with, translated to Dr.Jit (one definition of the formula, two
@@ -28,8 +29,6 @@ or, from Python, ``mi.load_dict({..., "bsdf": fit.to_mitsuba()})``.
 """
 
 from __future__ import annotations
-
-import html
 
 import numpy as np
 
@@ -207,35 +206,3 @@ def mitsuba_bsdf(model_or_fit, params=None):
     for name, v in values.items():
         out[_key(name)] = float(v[0]) if v.size == 1 else [float(x) for x in v]
     return out
-
-
-def bsdf_xml(model_or_fit, params=None, bsdf_id: str = "brdffit") -> str:
-    """The Mitsuba scene-XML fragment of :func:`mitsuba_bsdf`: a ``<scene>`` holding one
-    ``<bsdf type="brdffit" id=...>``, for ``<include filename="..."/>`` in a user's scene."""
-    model, values = _model_and_params(model_or_fit, params)
-    about = f"brdffit fit: {model.name}"
-    if hasattr(model_or_fit, "data_name") and model_or_fit.data_name:
-        about += f" on {model_or_fit.data_name}"
-    if getattr(model_or_fit, "converged", True) is False:
-        about += " (the fit did not converge)"
-    lines = [
-        '<?xml version="1.0" encoding="utf-8"?>',
-        f"<!-- {html.escape(about).replace('--', '- -')}. {model.citation.replace('--', '- -')}.",
-        "     Load it with `import brdffit; brdffit.register_mitsuba()` (after mi.set_variant), include it",
-        '     with <include filename="THIS FILE"/> and refer to it with <ref id="' + html.escape(bsdf_id) + '"/>;',
-        "     render it like any scene. -->",
-        '<scene version="3.0.0">',
-        f'    <bsdf type="{PLUGIN}" id="{html.escape(bsdf_id, quote=True)}">',
-        f'        <string name="model" value="{html.escape(model.name, quote=True)}"/>',
-    ]
-    if model.channels != 3:
-        lines.append(f'        <integer name="channels" value="{int(model.channels)}"/>')
-    for name, v in values.items():
-        if v.size == 3:
-            lines.append(f'        <rgb name="{_key(name)}" value="{", ".join(repr(float(x)) for x in v)}"/>')
-        elif v.size == 1:
-            lines.append(f'        <float name="{_key(name)}" value="{float(v[0])!r}"/>')
-        else:  # pragma: no cover - parameters are 1 or 3 values (SPEC 4)
-            raise ValueError(f"{name}: {v.size} values")
-    lines += ["    </bsdf>", "</scene>", ""]
-    return "\n".join(lines)
