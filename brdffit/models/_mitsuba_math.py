@@ -10,12 +10,12 @@ sampling, the only setting the native models write.
 from __future__ import annotations
 
 import functools
-import math
 
 import jax.numpy as jnp
 import numpy as np
 
 from . import _math as m
+from . import _microfacet as mf
 
 #: Entries of roughplastic's precomputed external transmittance table over cos theta in [0, 1]
 #: (Mitsuba's MI_ROUGH_TRANSMITTANCE_RES).
@@ -68,19 +68,14 @@ def fresnel_dielectric(cos_theta_i, eta):
 
 
 def ggx_d(h, alpha):
-    """Mitsuba's GGX ``eval(m)`` (isotropic): alpha^2 / (pi (sin^2 + alpha^2 cos^2)^2), in the form
-    that stays exact at small alpha (equal to ``brdffit.models.ggx.ggx_ndf``)."""
-    sin2, cos2 = m.sin2_cos2_theta(h)
-    a2 = alpha * alpha
-    return a2 / (jnp.pi * (cos2 * a2 + sin2) ** 2)
+    """Mitsuba's GGX ``eval(m)`` (isotropic): the kit's D (``_microfacet.ggx_d``)."""
+    return mf.ggx_d(h, alpha)
 
 
 def smith_g1(v, h, alpha):
-    """Mitsuba's GGX ``smith_g1(v, m)``: 2 / (1 + sqrt(1 + alpha^2 tan^2 theta_v)), 1 at normal
-    incidence, 0 where v sees the back of the microfacet m."""
-    g = 2.0 / (1.0 + jnp.sqrt(1.0 + alpha * alpha * m.tan2_theta(v)))
+    """Mitsuba's GGX ``smith_g1(v, m)``: the kit's G1, 0 where v sees the back of the microfacet m."""
     back = m.dot(v, h) * v[..., 2:3] <= 0.0
-    return jnp.where(back, 0.0, g)
+    return jnp.where(back, 0.0, mf.smith_g1(v, alpha))
 
 
 def rgb(values) -> dict:
@@ -89,9 +84,8 @@ def rgb(values) -> dict:
 
 
 def ggx_halfwidth(p) -> float:
-    """Half width at half maximum of a GGX lobe of roughness ``p["alpha"]``, in reflected directions:
-    twice the half-vector angle where D falls to half its peak (as ``brdffit.models.ggx``)."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+    """Half width at half maximum of a GGX lobe of roughness ``p["alpha"]`` (``_microfacet.halfwidth``)."""
+    return mf.halfwidth(p["alpha"])
 
 
 # -- roughplastic's precomputed tables ----------------------------------------------------------

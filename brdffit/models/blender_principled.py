@@ -49,6 +49,7 @@ import jax.numpy as jnp
 
 from . import _cycles_math as cy
 from . import _math as m
+from . import _microfacet as mf
 from .base import Lobe, Model, Param
 # the metal-roughness conventions it shares with glTF (GGX of alpha = roughness^2, base_color the
 # diffuse share): one lobe width and one sampling declaration for both
@@ -73,15 +74,9 @@ FIXED_INPUTS = {"Diffuse Roughness": 0.0, "Subsurface Weight": 0.0, "Transmissio
 def formula(p, wi, wo):
     base, metallic, rough = p["base_color"], p["metallic"], p["roughness"]
     tint = p["specular_tint"]
-    a2 = (rough * rough) ** 2
+    alpha = rough * rough
     h = m.half_vector(wi, wo)
-    sin2, cos2 = m.sin2_cos2_theta(h)
-    d = a2 / (jnp.pi * (sin2 + a2 * cos2) ** 2)
-
-    def lam(w):
-        return 0.5 * (jnp.sqrt(1.0 + a2 * m.tan2_theta(w)) - 1.0)
-
-    lobe = d / ((1.0 + lam(wi) + lam(wo)) * 4.0 * m.cos_theta(wi) * m.cos_theta(wo))
+    lobe = mf.ggx_d(h, alpha) * mf.smith_g2(wi, wo, alpha) / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
     c = jnp.clip(m.dot(wo, h), m.COS_EPS, 1.0)
     metal = cy.f82_tint(c, base, tint) * lobe
     # the dielectric layer: Specular IOR Level scales F0 (0.5 leaves it), Specular Tint tints it

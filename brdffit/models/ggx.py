@@ -45,6 +45,7 @@ import math
 import jax.numpy as jnp
 
 from . import _math as m
+from . import _microfacet as mf
 from .base import Model, Param, Proposal
 
 INF = math.inf
@@ -57,24 +58,12 @@ PARAMS = (
 )
 
 
-def ggx_ndf(h, alpha):
-    """Trowbridge-Reitz D(h) for a unit half vector h, (N, 1)."""
-    sin2, cos2 = m.sin2_cos2_theta(h)
-    a2 = alpha * alpha
-    return a2 / (jnp.pi * (cos2 * a2 + sin2) ** 2)
-
-
-def smith_g1(w, alpha):
-    """Separable Smith masking for GGX, (N, 1)."""
-    return 2.0 / (1.0 + jnp.sqrt(1.0 + alpha * alpha * m.tan2_theta(w)))
-
-
 def specular_lobe(p, wi, wo):
-    """ks F G D / (4 (n.l)(n.v)) without the diffuse term, (N, C)."""
+    """ks F G D / (4 (n.l)(n.v)) without the diffuse term, (N, C); D and G from the kit (``_microfacet``)."""
     h = m.half_vector(wi, wo)
     alpha = p["alpha"]
-    d = ggx_ndf(h, alpha)
-    g = smith_g1(wi, alpha) * smith_g1(wo, alpha)
+    d = mf.ggx_d(h, alpha)
+    g = mf.smith_g1(wi, alpha) * mf.smith_g1(wo, alpha)
     f = m.schlick_fresnel(p["f0"], m.dot(wi, h))
     return p["ks"] * f * g * d / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
 
@@ -85,7 +74,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """D(th_h)/D(0) = 1/2 at tan th_h = alpha sqrt(sqrt(2) - 1); reflected directions: twice that."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+    return mf.halfwidth(p["alpha"])
 
 
 def sampling(p):

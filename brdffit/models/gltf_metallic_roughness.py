@@ -17,6 +17,7 @@ roughness   1         [0.01, 1] (log)    [0.01, 1]    0.5      roughness  ``roug
     w = (1 - |v.h|)^5,  alpha = roughness^2
     S = D V:  D = alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2),
               V = 1 / (2 (|n.v| sqrt(alpha^2 + (1 - alpha^2)(n.l)^2) + |n.l| sqrt(alpha^2 + (1 - alpha^2)(n.v)^2)))
+              (V = G2 / (4 (n.l)(n.v)) with G2 the height-correlated Smith G: the kit, ``_microfacet``)
     dielectric = (1 - F_d) base_color / pi + F_d S,   F_d = 0.04 + 0.96 w
     metal      = F_m S,                               F_m = base_color + (1 - base_color) w
     f_r        = (1 - metallic) dielectric + metallic metal
@@ -31,11 +32,10 @@ diffuse term). Bounds: the factors' ranges; roughness from 0.01 (alpha 1e-4: a m
 
 from __future__ import annotations
 
-import math
-
 import jax.numpy as jnp
 
 from . import _math as m
+from . import _microfacet as mf
 from .base import Lobe, Model, Param, Proposal
 
 PARAMS = (
@@ -47,13 +47,11 @@ PARAMS = (
 
 def formula(p, wi, wo):
     base, metallic = p["base_color"], p["metallic"]
-    a2 = (p["roughness"] * p["roughness"]) ** 2
+    alpha = p["roughness"] * p["roughness"]
     h = m.half_vector(wi, wo)
-    sin2, cos2 = m.sin2_cos2_theta(h)
-    d = a2 / (jnp.pi * (cos2 * a2 + sin2) ** 2)  # = alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2)
-    nl, nv = m.cos_theta(wi), m.cos_theta(wo)
-    vis = 0.5 / (nv * jnp.sqrt(a2 + (1.0 - a2) * nl * nl) + nl * jnp.sqrt(a2 + (1.0 - a2) * nv * nv))
-    s = d * vis
+    # D (= alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2)) and the height-correlated G2 from the kit:
+    # D G2 / (4 (n.l)(n.v)) is the spec's D V
+    s = mf.ggx_d(h, alpha) * mf.smith_g2(wi, wo, alpha) / (4.0 * m.cos_theta(wi) * m.cos_theta(wo))
     w = (1.0 - jnp.clip(jnp.abs(m.dot(wo, h)), 0.0, 1.0)) ** 5
     f_d = 0.04 + 0.96 * w
     f_m = base + (1.0 - base) * w
@@ -63,7 +61,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """As ``ggx`` with alpha = roughness^2."""
-    return 2.0 * math.atan(p["roughness"] ** 2 * math.sqrt(math.sqrt(2.0) - 1.0))
+    return mf.halfwidth(p["roughness"] ** 2)
 
 
 def to_native(p) -> dict:

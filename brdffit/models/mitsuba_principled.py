@@ -54,6 +54,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from . import _math as m
+from . import _microfacet as mf
 from ._mitsuba_math import fresnel_dielectric, ggx_halfwidth, rgb, smith_g1
 from .base import Lobe, Model, Param, Proposal
 
@@ -90,21 +91,10 @@ def dist_params(roughness, anisotropic):
     return jnp.maximum(0.001, r2 / aspect), jnp.maximum(0.001, r2 * aspect)
 
 
-def ggx_d_aniso(h, ax, ay):
-    """Mitsuba's anisotropic GGX ``eval(m)``: 1 / (pi ax ay ((hx/ax)^2 + (hy/ay)^2 + hz^2)^2)."""
-    hx, hy, hz = h[..., 0:1], h[..., 1:2], h[..., 2:3]
-    q = (hx / ax) ** 2 + (hy / ay) ** 2 + hz * hz
-    return 1.0 / (jnp.pi * ax * ay * q * q)
-
-
 def smith_g1_aniso(v, h, ax, ay):
-    """Mitsuba's GGX ``smith_g1`` with the roughness projected on v's azimuth; 0 where v sees the
-    back of the microfacet h."""
-    sin2, _ = m.sin2_cos2_theta(v)
-    cos_phi2 = jnp.where(sin2 > 0.0, v[..., 0:1] ** 2 / jnp.where(sin2 > 0.0, sin2, 1.0), 1.0)  # unit v
-    alpha2 = ax * ax * cos_phi2 + ay * ay * (1.0 - cos_phi2)  # the roughness seen along v's azimuth
-    g = 2.0 / (1.0 + jnp.sqrt(1.0 + alpha2 * m.tan2_theta(v)))  # tan^2 finite at the horizon
-    return jnp.where(m.dot(v, h) * v[..., 2:3] <= 0.0, 0.0, g)
+    """Mitsuba's GGX ``smith_g1`` with the roughness projected on v's azimuth (the kit's
+    ``smith_g1_aniso``); 0 where v sees the back of the microfacet h."""
+    return jnp.where(m.dot(v, h) * v[..., 2:3] <= 0.0, 0.0, mf.smith_g1_aniso(v, ax, ay))
 
 
 def schlick(f0, cos):
@@ -128,7 +118,7 @@ def formula(p, wi, wo):
     eta = eta_of_specular(p["specular"])
 
     ax, ay = dist_params(roughness, p["anisotropic"])
-    d = ggx_d_aniso(h, ax, ay)
+    d = mf.ggx_d_aniso(h, ax, ay)
     g = smith_g1_aniso(wi, h, ax, ay) * smith_g1_aniso(wo, h, ax, ay)
     f_dielectric, _, _ = fresnel_dielectric(cos_d, eta)
     fresnel = (1.0 - metallic) * f_dielectric + metallic * schlick(base, cos_d)
