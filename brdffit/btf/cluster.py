@@ -35,9 +35,8 @@ What brdffit does on top:
   (``threads_per_worker=1``): a tile's fit uses the process's cores itself.
 - Dask's nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (to give freed memory back
   to the system). That turns glibc's dynamic mmap threshold off: every large array of a tile's fit
-  is a fresh ``mmap`` whose pages fault in anew. Measured on 8 x 8 ggx tiles fitted inside a
-  worker: 1.45 M instead of 0.06 M page faults, 25-35 % more CPU time than with it unset
-  (``benchmarks/bench_cluster.py``, whole runs on a shared machine: 14-17 % more). A
+  is a fresh ``mmap`` whose pages fault in anew, which costs a tile's fit measurable CPU time
+  (``benchmarks/bench_cluster.py``; results in benchmarks/README.md). A
   run whose workers have it set warns once (a ``BrdffitWarning``) with the cure: start the workers
   with ``distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_`` set to None in their Dask
   configuration.

@@ -187,10 +187,10 @@ def load_or_compile(key, build, example):
     it: it only loads the machine code (``jax.experimental.serialize_executable``; loading runs
     what the file holds, so the cache folder is trusted as JAX's own cache folder is).
 
-    Measured on ggx/UBO-81, the fit in a second process: 0.32-0.39 s, against 0.55-0.72 s when the
-    traced program was kept (``jax.export``), lowered again in every process (which also imported
-    scipy.linalg for LAPACK), then handed its machine code by JAX's cache; ``brdffit fit`` as a whole
-    ~0.4 s faster (issue 8's note; ``benchmarks/bench_cli.py`` prints the phases)."""
+    Keeping the traced program instead (``jax.export``) lowered it again in every process (which also
+    imported scipy.linalg for LAPACK) before JAX's cache handed its machine code back: a second
+    process's fit was markedly slower (``benchmarks/bench_cli.py`` prints the phases; results in
+    benchmarks/README.md)."""
     import hashlib
     import pickle
     import secrets

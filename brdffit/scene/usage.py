@@ -53,10 +53,9 @@ if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed
     from jaxtyping import Float
 
 
-#: Weight of the pairs the scene does not use, relative to its most used ones. Measured with
-#: benchmarks/bench_scene.py (grazing floor, 4 RGL materials, ggx): at 0.3 the scene's FLIP
-#: gains 0.03-0.19 and the sphere validation loses less than that on every material; at 0.1 the
-#: scene gains hardly more and one material's sphere FLIP loses more (0.16) than its scene gains.
+#: Weight of the pairs the scene does not use, relative to its most used ones: chosen with
+#: benchmarks/bench_scene.py, where the scene gains more than the sphere validation loses on every
+#: material (results in benchmarks/README.md).
 DEFAULT_FLOOR = 0.3
 #: Distance (degrees, see Usage.coverage) within which a measured sample covers a scene's pair.
 COVERAGE_RADIUS_DEG = 20.0
