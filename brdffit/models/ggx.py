@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -85,7 +86,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """D(th_h)/D(0) = 1/2 at tan th_h = alpha sqrt(sqrt(2) - 1); reflected directions: twice that."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+    return 2.0 * np.arctan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
 
 
 def sampling(p):

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Lobe, Model, Param, Proposal
@@ -63,7 +64,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """As ``ggx`` with alpha = roughness^2."""
-    return 2.0 * math.atan(p["roughness"] ** 2 * math.sqrt(math.sqrt(2.0) - 1.0))
+    return 2.0 * np.arctan(p["roughness"] ** 2 * math.sqrt(math.sqrt(2.0) - 1.0))
 
 
 def to_native(p) -> dict:
