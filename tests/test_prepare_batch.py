@@ -75,3 +75,29 @@ def test_the_default_name_is_batch():
     values = np.full((2, len(wi), 3), np.nan)
     with pytest.raises(UsageError, match=r"^batch\[0\]: no valid samples"):
         prepare_values(values, wi, wo, np.ones(len(wi)))
+
+
+def test_the_accelerator_s_preparation_equals_the_host_s():
+    """``prepare_values_device`` (masks and floors computed where the values are, for an accelerator)
+    gives prepare_values' arrays: the same masks and values, the floors to rounding (their sums in
+    another order)."""
+    import jax.numpy as jnp
+
+    from brdffit.fitting.problem import prepare_values_device
+
+    wi, wo = ubo_pairs()
+    rng = np.random.default_rng(7)
+    values = rng.uniform(0.0, 2.0, (4, len(wi), 3)).astype(np.float32)
+    for case in ("all", "masked"):
+        v = values.copy()
+        if case == "masked":
+            v[2, 100] = np.nan  # one texel leaves out a sample the others use: weights per texel
+        want = prepare_values(v, wi, wo, np.ones(len(wi)))
+        got = prepare_values_device(jnp.asarray(v), wi, wo, np.ones(len(wi)))
+        for field, a, b in zip(want._fields, got, want):
+            assert np.shape(a) == np.shape(b), (case, field)
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=0, err_msg=f"{case} {field}")
+    v = values.copy()
+    v[1] = np.nan
+    with pytest.raises(UsageError, match=r"^tile\[1\]: no valid samples"):
+        prepare_values_device(jnp.asarray(v), wi, wo, np.ones(len(wi)), name="tile")

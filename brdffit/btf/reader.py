@@ -94,16 +94,28 @@ class BTF:
                          shape=(self.n_tiles, self.tile * self.tile, N_PAIRS, self.channels))
 
     # access -------------------------------------------------------------------------------------
-    def tile_values(self, t: int) -> Float[np.ndarray, "h w 6561 C"]:
+    def tile_values(self, t: int, out: np.ndarray | None = None) -> Float[np.ndarray, "h w 6561 C"]:
         """Values of tile ``t`` as (h, w, 6561, C) float32: one sequential read of the file (no memory
-        map), in place for a whole tile; an edge tile's texels picked out of it."""
+        map), straight into ``out`` (any array of h * w * 6561 * C float32, e.g. a slice of a larger
+        buffer) when given and the tile is whole; an edge tile's texels picked out of it."""
         r0, r1, c0, c1 = self.tile_box(t)
+        h, w = r1 - r0, c1 - c0
         size = self.tile * self.tile * N_PAIRS * self.channels
+        whole = (h, w) == (self.tile, self.tile)
+        if out is not None and whole:
+            a = out.reshape(-1)
+            with open(self.cache, "rb") as f:
+                f.seek(t * size * 4)
+                if f.readinto(memoryview(a).cast("B")) != size * 4:
+                    raise InputError(self.cache, f"truncated cache file (tile {t})")
+            return out.reshape(h, w, N_PAIRS, self.channels)
         a = np.fromfile(self.cache, dtype=np.float32, count=size, offset=t * size * 4)
         a = a.reshape(self.tile, self.tile, N_PAIRS, self.channels)
-        if (r1 - r0, c1 - c0) == (self.tile, self.tile):
-            return a
-        return np.ascontiguousarray(a[: r1 - r0, : c1 - c0])
+        a = a if whole else np.ascontiguousarray(a[:h, :w])
+        if out is not None:
+            out.reshape(h, w, N_PAIRS, self.channels)[...] = a
+            return out.reshape(h, w, N_PAIRS, self.channels)
+        return a
 
     def texel(self, row: int, col: int) -> Measurement:
         """The 81x81 table of one texel as a UBO-81 Measurement."""

@@ -18,17 +18,19 @@ Within a tile only, so that tiles stay independent (resuming, several processes)
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
 
-from .reader import BTF
+from .reader import BTF, N_PAIRS
 
 #: Lattice strides of the passes over a tile (see neighbour_passes): 1/16 of the texels start
 #: from the initialisation grid, the others from a fitted neighbour 1-2 texels away.
 STRIDES = (4, 2, 1)
 
 
+@functools.lru_cache(maxsize=16)
 def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, np.ndarray]]:
     """The order in which the texels of an h x w tile are fitted, and where each one starts.
 
@@ -82,26 +84,30 @@ def load_tiles(btf: BTF, tiles, mdl, options):
     tiles in a thread overlaps their transfer with the current solve."""
     import jax
 
-    from ..fitting.problem import data_unit, in_unit, prepare_values
+    from ..fitting.problem import data_unit, in_unit, prepare_values, prepare_values_device
     from ..grid import ubo_pairs
 
-    blocks = [btf.tile_values(t) for t in tiles]  # (h, w, 6561, C) float32 each
-    shapes = [b.shape[:2] for b in blocks]
-    values = np.concatenate([b.reshape(-1, *b.shape[2:]) for b in blocks]) if len(blocks) > 1 else \
-        blocks[0].reshape(-1, *blocks[0].shape[2:])
-    del blocks
     wi, wo = ubo_pairs()
     name = f"{btf.name} tile {tiles[0]}" if len(tiles) == 1 else f"{btf.name} tiles {tiles[0]}-{tiles[-1]}"
-    data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True)
+    device = jax.local_devices()[0].platform != "cpu"
+    boxes = [btf.tile_box(t) for t in tiles]
+    shapes = [(r1 - r0, c1 - c0) for r0, r1, c0, c1 in boxes]
+    offsets = np.cumsum([0] + [h * w for h, w in shapes])
+    if device:  # sent as read, prepared there
+        values = jax.numpy.concatenate([jax.device_put(btf.tile_values(t).reshape(-1, N_PAIRS, btf.channels))
+                                        for t in tiles])
+        data = prepare_values_device(values, wi, wo, np.ones(len(wi)), name=name)
+    else:  # read straight into one buffer, prepared in place
+        values = np.empty((int(offsets[-1]), N_PAIRS, btf.channels), np.float32)
+        for t, s, e in zip(tiles, offsets[:-1], offsets[1:]):
+            btf.tile_values(t, out=values[s:e])
+        data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True)
     del values
     space = options.space(mdl)
     # The unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
     # reflectance's range); the maps come back in the BTF's.
     unit = data_unit(mdl, options.loss, data)
     data, space = in_unit(data, unit), space.in_unit(unit)
-    if jax.local_devices()[0].platform != "cpu":
-        data = data._replace(ref=jax.device_put(data.ref), floor=jax.device_put(data.floor),
-                             sqrt_w=jax.device_put(data.sqrt_w) if np.ndim(data.sqrt_w) == 3 else data.sqrt_w)
     return data, space, unit, shapes
 
 

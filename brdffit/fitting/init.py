@@ -371,8 +371,8 @@ def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str,
             kind = None
         if spacing is not None and kind is not None and kind.halfwidth is not None and kind.lobes:
             names = kind.lobes[0].params
-            width = np.vectorize(lambda *x: 2.0 * float(kind.halfwidth(dict(zip(names, x)))), otypes=[float])(
-                *(v[:, slices[q].start] for q in lobe.params))
+            own = {name: v[:, slices[q].start] for name, q in zip(names, lobe.params)}
+            width = 2.0 * np.asarray(kind.halfwidth(own), np.float64)  # every fit at once (NumPy arrays)
             needle = width < NEEDLE_FRACTION * spacing
         if (off | needle).any():
             out[tuple(lobe.params)] = off | needle

@@ -31,36 +31,30 @@ def cholesky(A: Float[Array, "n n"]) -> Float[Array, "n n"]:
     A = jnp.asarray(A)
     n = A.shape[-1]
     rows = jnp.arange(n)
-
-    def column(j, L):
+    L = jnp.zeros_like(A)
+    for j in range(n):
         v = A[:, j] - L @ L[j, :]  # L[j, k] is still 0 for k >= j: the sum runs over k < j
         d = jnp.sqrt(v[j])
-        return L.at[:, j].set(jnp.where(rows >= j, v / d, 0.0))
-
-    return jax.lax.fori_loop(0, n, column, jnp.zeros_like(A))
+        L = L.at[:, j].set(jnp.where(rows >= j, v / d, 0.0))
+    return L
 
 
 def forward_substitution(L: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
     """y with L y = b, L lower triangular."""
     L, b = jnp.asarray(L), jnp.asarray(b)
-    n = L.shape[-1]
-
-    def row(i, y):
-        return y.at[i].set((b[i] - L[i, :] @ y) / L[i, i])  # y[k] is still 0 for k >= i
-
-    return jax.lax.fori_loop(0, n, row, jnp.zeros_like(b))
+    y = jnp.zeros_like(b)
+    for i in range(L.shape[-1]):
+        y = y.at[i].set((b[i] - L[i, :] @ y) / L[i, i])  # y[k] is still 0 for k >= i
+    return y
 
 
 def back_substitution(L: Float[Array, "n n"], y: Float[Array, " n"]) -> Float[Array, " n"]:
     """x with L^T x = y, L lower triangular."""
     L, y = jnp.asarray(L), jnp.asarray(y)
-    n = L.shape[-1]
-
-    def row(k, x):
-        i = n - 1 - k
-        return x.at[i].set((y[i] - L[:, i] @ x) / L[i, i])  # x[k] is still 0 for k <= i
-
-    return jax.lax.fori_loop(0, n, row, jnp.zeros_like(y))
+    x = jnp.zeros_like(y)
+    for i in reversed(range(L.shape[-1])):
+        x = x.at[i].set((y[i] - L[:, i] @ x) / L[i, i])  # x[k] is still 0 for k <= i
+    return x
 
 
 def spd_solve(A: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:

@@ -171,15 +171,24 @@ def prepare_values(values, wi, wo, weights, name: str = "batch", own: bool = Fal
     masks, floors = np.empty((n, N), bool), np.empty((n, c))
     for s in range(0, n, _BLOCK):  # blocks: the float64 work arrays stay small whatever n is
         block = ref[s : s + _BLOCK]
-        mask = shared[None, :] & _rows_all(np.isfinite(block))
-        block[~mask] = 0.0  # the mask holds finite rows only
+        # One pass finds the tables with a non-finite value (their sum is not finite); only those are
+        # looked at sample by sample.
+        odd = ~np.isfinite(np.add.reduce(block.reshape(len(block), -1), axis=1, dtype=np.float64))
+        mask = np.broadcast_to(shared, (len(block), N)).copy()
+        if odd.any():
+            mask[odd] &= _rows_all(np.isfinite(block[odd]))
+            rows = block[odd]
+            rows[~mask[odd]] = 0.0  # the mask holds finite rows only
+            block[odd] = rows
+        if not shared.all():
+            block[:, ~shared] = 0.0
         w = np.where(mask, w0[None, :], 0.0)
         total = w.sum(axis=1, keepdims=True)
         if np.any(total == 0):
             raise UsageError(f"{name}[{s + int(np.argmin(total[:, 0]))}]: no valid samples to fit (all have weight 0, "
                              "non-finite values or lie below the horizon)")
-        # as prepare (tested equal to the last bit: the same einsum loop)
-        mean_abs = np.einsum("kn,knc->kc", w, np.abs(block.astype(np.float64))) / total
+        # as prepare (tested equal to the last bit: the same einsum loop, the float32 values cast in it)
+        mean_abs = np.einsum("kn,knc->kc", w, np.abs(block), dtype=np.float64) / total
         floors[s : s + _BLOCK] = np.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
         masks[s : s + _BLOCK] = mask
     same = bool(np.all(masks == masks[:1]))
@@ -188,6 +197,42 @@ def prepare_values(values, wi, wo, weights, name: str = "batch", own: bool = Fal
     wi, wo = _usable_directions(wi, wo)
     cos_i = np.clip(wi[:, 2:3], 1e-7, 1.0)
     return Data(wi, wo, ref, sqrt_w[0] if same else sqrt_w, cos_i, floors)
+
+
+def prepare_values_device(values, wi, wo, weights, name: str = "batch") -> Data:
+    """:func:`prepare_values` on the accelerator that holds ``values`` (n, N, C) (a JAX array there): the
+    masks and floors computed there, so that the host only reads and sends the values (one compiled call;
+    the floors equal prepare_values' to rounding, their sums taken in another order)."""
+    import jax
+
+    wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+    w0 = np.asarray(weights, dtype=np.float64)
+    shared = (w0 > 0) & (wi[:, 2] > 0) & (wo[:, 2] > 0) & _rows_all(np.isfinite(wi)) & _rows_all(np.isfinite(wo))
+    ref, floor, total, same = _prepare_on_device(values, shared, w0)
+    total = np.asarray(total)
+    if np.any(total == 0):
+        raise UsageError(f"{name}[{int(np.argmin(total))}]: no valid samples to fit (all have weight 0, "
+                         "non-finite values or lie below the horizon)")
+    c = values.shape[-1]
+    if bool(same):
+        w = np.where(shared, w0, 0.0)
+        sqrt_w = np.sqrt(w / (w.sum() * c))[:, None]
+    else:
+        sqrt_w = jax.jit(lambda r, s, w: jnp.sqrt(jnp.where(jnp.all(jnp.isfinite(r), -1) & s, w, 0.0)
+                                                  / (jnp.asarray(total)[:, None] * c))[..., None])(values, shared, w0)
+    wi, wo = _usable_directions(wi, wo)
+    return Data(wi, wo, ref, sqrt_w, np.clip(wi[:, 2:3], 1e-7, 1.0), floor)
+
+
+@functools.partial(jax.jit, static_argnums=())
+def _prepare_on_device(values, shared, w0):
+    mask = shared[None, :] & jnp.all(jnp.isfinite(values), axis=-1)
+    ref = jnp.where(mask[..., None], values, 0.0).astype(values.dtype)
+    w = jnp.where(mask, w0[None, :], 0.0)
+    total = w.sum(axis=1)
+    mean_abs = jnp.einsum("kn,knc->kc", w, jnp.abs(ref).astype(w.dtype)) / total[:, None]
+    floor = jnp.maximum(0.01 * mean_abs, np.finfo(np.float64).tiny * 1e10)
+    return ref, floor, total, jnp.all(mask == mask[:1])
 
 
 def stack(parts) -> Data:

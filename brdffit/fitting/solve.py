@@ -31,18 +31,20 @@ class FitConstants(NamedTuple):
     loss_floor: jax.Array  # () the loss of an exact fit (residuals at roundoff level)
 
 
-def fit_constants(model: Model, loss: str, data: Data) -> FitConstants:
+def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitConstants:
     """What every step of a fit shares and computes once (jit-able): g(f_ref) of the loss
     (``losses.reference_transform``), the direction-only terms of a separable model
-    (``structure.precompute_geometry``, or None), and the loss of an exact fit relative to the
-    data ((1e-13)^2 x the loss of f = 0: residuals at roundoff level)."""
+    (``structure.precompute_geometry``, or None; ``geometry``: already computed, for the directions
+    a batch's fits share), and the loss of an exact fit relative to the data ((1e-13)^2 x the loss of
+    f = 0: residuals at roundoff level)."""
     from .structure import precompute_geometry
 
     wi, wo, ref, sqrt_w, cos_i, floor = data
+    if geometry is None:
+        geometry = precompute_geometry(model, data)
     # Materialised once: XLA would otherwise recompute g(f_ref) (a log1p per value) inside every
     # fusion that reads it (loss floor, start, result check, metrics).
-    g_ref, geometry = jax.lax.optimization_barrier(
-        (L.reference_transform(loss, ref, cos_i, floor), precompute_geometry(model, data)))
+    g_ref, geometry = jax.lax.optimization_barrier((L.reference_transform(loss, ref, cos_i, floor), geometry))
     r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor, g_ref)
     return FitConstants(g_ref, geometry, 1e-26 * jnp.sum(r0 * r0))
 

@@ -78,6 +78,17 @@ def map_lanes(fn, lane_args, data: Data, lanes: int):
     return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
 
 
+def shared_geometry(model: Model, data: Data):
+    """The direction-only terms of a separable model (``structure.precompute_geometry``) when every lane
+    shares its directions (a BTF's texels): computed once per call, outside the lanes' loop; else None."""
+    from .structure import precompute_geometry
+
+    lane = per_lane(data)
+    if lane.wi or lane.wo:
+        return None
+    return precompute_geometry(model, _solve_dtype(data))
+
+
 def _solve_dtype(data: Data) -> Data:
     """The data in the solve's precision (a BTF's values arrive as float32, as stored)."""
     dtype = data.wi.dtype
@@ -148,15 +159,16 @@ def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, 
 
     solve = solve_one(model, loss, solver, rtol, atol, max_steps)
 
-    def one(v, resume, data, lo, hi, free, steps):
+    def one(v, resume, data, lo, hi, free, steps, geometry):
         data = _solve_dtype(data)
-        consts = fit_constants(model, loss, data)
+        consts = fit_constants(model, loss, data, geometry)
         if solver in RESUMABLE:
             return solve(v, data, lo, hi, free, consts, resume, steps)
         return solve(v, data, lo, hi, free, consts)
 
     def run(lane, data, lo, hi, free, steps):
-        return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, steps), lane, data, lanes)
+        geometry = shared_geometry(model, data)
+        return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, steps, geometry), lane, data, lanes)
 
     return run
 
@@ -172,9 +184,9 @@ def finish_stage(model: Model, loss: str, metrics: bool, jtj: bool, lanes: int):
     model_at = model_values(model)
     ne = normal_equations(model, loss)
 
-    def one(v, data):
+    def one(v, data, geometry):
         data = _solve_dtype(data)
-        consts = fit_constants(model, loss, data)
+        consts = fit_constants(model, loss, data, geometry)
         values = values_metrics(model_at(v, data, consts.geometry), data, (loss,))
         out = {"loss": values[loss], "floor": consts.loss_floor}
         if metrics:
@@ -184,6 +196,7 @@ def finish_stage(model: Model, loss: str, metrics: bool, jtj: bool, lanes: int):
         return out
 
     def run(v, data):
-        return map_lanes(one, v, data, lanes)
+        geometry = shared_geometry(model, data)
+        return map_lanes(lambda x, d: one(x, d, geometry), v, data, lanes)
 
     return run

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 
@@ -81,4 +82,4 @@ def halfwidth(alpha) -> float:
     """The lobe's half width at half maximum in reflected directions: the distribution of slopes,
     D cos^4 th_h, falls to half its peak at tan th_h = alpha sqrt(sqrt(2) - 1) (D itself does for a
     narrow lobe), and a reflected direction turns twice the half vector."""
-    return 2.0 * math.atan(alpha * math.sqrt(math.sqrt(2.0) - 1.0))
+    return 2.0 * np.arctan(alpha * math.sqrt(math.sqrt(2.0) - 1.0))  # floats, or arrays: one width per fit

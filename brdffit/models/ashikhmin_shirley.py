@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -72,7 +73,7 @@ def formula(p, wi, wo):
 def halfwidth(p):
     """(n.h)^e = 1/2 at th_h = acos(2^(-1/e)) along the narrower axis (e = max(nu, nv)); twice
     that in reflected directions."""
-    return 2.0 * math.acos(2.0 ** (-1.0 / max(p["nu"], p["nv"])))
+    return 2.0 * np.arccos(2.0 ** (-1.0 / np.maximum(p["nu"], p["nv"])))
 
 
 def sampling(p):

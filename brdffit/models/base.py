@@ -206,7 +206,8 @@ class Model:
     lobes: tuple[Lobe, ...] | None = None
     #: ``halfwidth(params) -> radians``: half width at half maximum of the model's lobe, measured
     #: in reflected directions (about twice the half-vector angle for a microfacet lobe), from the
-    #: lobe's parameters by their base names (floats). None where the model has no specular lobe.
+    #: lobe's parameters by their base names (floats, or NumPy arrays of them: one width per fit). None
+    #: where the model has no specular lobe.
     #: Used to warn about lobes narrower than the sample spacing (``brdffit.fitting.space``).
     halfwidth: Callable[[Mapping[str, float]], float] | None = None
     #: Native models only (SPEC 13): ``to_native(params) -> dict``, what the renderer or format

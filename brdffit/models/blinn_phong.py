@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -60,7 +61,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """(n.h)^n = 1/2 at th_h = acos(2^(-1/n)); twice that in reflected directions."""
-    return 2.0 * math.acos(2.0 ** (-1.0 / p["n"]))
+    return 2.0 * np.arccos(2.0 ** (-1.0 / np.asarray(p["n"], np.float64)))
 
 
 def sampling(p):

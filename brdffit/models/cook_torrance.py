@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -81,7 +82,7 @@ def formula(p, wi, wo):
 def halfwidth(p):
     """Beckmann D(th_h)/D(0) ~ exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2); twice
     that in reflected directions."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.log(2.0)))
+    return 2.0 * np.arctan(p["alpha"] * math.sqrt(math.log(2.0)))
 
 
 def sampling(p):

@@ -51,6 +51,7 @@ import functools
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Lobe, Model, Param, Proposal
@@ -102,7 +103,7 @@ def _formula(suffixes, p, wi, wo):
 
 def halfwidth(p):
     """A lobe with |C| = 1 is (cos psi)^n: 1/2 at psi = acos(2^(-1/n)) (|C| != 1 trades against rho)."""
-    return math.acos(2.0 ** (-1.0 / p["n"]))
+    return np.arccos(2.0 ** (-1.0 / np.asarray(p["n"], np.float64)))
 
 
 def _sampling(suffixes, p):

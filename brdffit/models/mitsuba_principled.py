@@ -52,6 +52,7 @@ transmission); anisotropic 0.9 stretches the lobe 3.2 : 1 (aspect^2 = 0.19); the
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from . import _microfacet as mf
@@ -152,7 +153,7 @@ def to_native(p) -> dict:
 
 def halfwidth(p):
     """As ``ggx`` with alpha = roughness^2 (the main lobe)."""
-    return ggx_halfwidth({"alpha": max(0.001, float(p["roughness"]) ** 2)})  # the isotropic width
+    return ggx_halfwidth({"alpha": np.maximum(0.001, np.asarray(p["roughness"], np.float64) ** 2)})  # the isotropic width
 
 
 def sampling(p):

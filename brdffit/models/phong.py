@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -65,7 +66,7 @@ def formula(p, wi, wo):
 
 def halfwidth(p):
     """(r.v)^n = 1/2 at the angle acos(2^(-1/n)) from the mirror direction."""
-    return math.acos(2.0 ** (-1.0 / p["n"]))
+    return np.arccos(2.0 ** (-1.0 / np.asarray(p["n"], np.float64)))
 
 
 def sampling(p):

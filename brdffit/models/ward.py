@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
+import numpy as np
 
 from . import _math as m
 from .base import Model, Param, Proposal
@@ -60,7 +61,7 @@ def formula(p, wi, wo):
 def halfwidth(p):
     """exp(-tan^2 th_h/alpha^2) = 1/2 at tan th_h = alpha sqrt(ln 2), along the narrower axis;
     twice that in reflected directions."""
-    return 2.0 * math.atan(min(p["alpha_x"], p["alpha_y"]) * math.sqrt(math.log(2.0)))
+    return 2.0 * np.arctan(np.minimum(p["alpha_x"], p["alpha_y"]) * math.sqrt(math.log(2.0)))
 
 
 def sampling(p):
