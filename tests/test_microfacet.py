@@ -90,6 +90,8 @@ def test_halfwidth_is_where_the_slope_distribution_falls_to_half():
         peak = np.asarray(mf.ggx_d(np.array([[0.0, 0.0, 1.0]]), alpha))[0, 0]
         ratio = float(np.asarray(mf.ggx_d(h, alpha))[0, 0] * math.cos(th) ** 4 / peak)
         assert ratio == pytest.approx(0.5, rel=1e-12), alpha
+    alphas = np.array([0.01, 0.1, 0.5, 1.0])  # one width per fit, as the fit driver asks for them
+    assert np.asarray(mf.halfwidth(alphas)).tolist() == [mf.halfwidth(float(a)) for a in alphas]
 
 
 def _values(model, rng):
