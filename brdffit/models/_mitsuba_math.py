@@ -91,7 +91,7 @@ def rgb(values) -> dict:
 def ggx_halfwidth(p) -> float:
     """Half width at half maximum of a GGX lobe of roughness ``p["alpha"]``, in reflected directions:
     twice the half-vector angle where D falls to half its peak (as ``brdffit.models.ggx``)."""
-    return 2.0 * math.atan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
+    return 2.0 * np.arctan(p["alpha"] * math.sqrt(math.sqrt(2.0) - 1.0))
 
 
 # -- roughplastic's precomputed tables ----------------------------------------------------------
