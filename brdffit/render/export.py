@@ -175,7 +175,7 @@ def map_bsdf(model, params):
         data = np.broadcast_to(v.reshape(height, width, -1), (height, width, size))
         # Mitsuba upsamples reflectances: a map above 1 is stored divided by its largest value
         scale = max(1.0, float(data.max())) if size == 3 else 1.0
-        texture = mi.load_dict({"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data / scale, np.float32)),
+        texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(data / scale, np.float32)),
                                 "raw": size == 1, "filter_type": "nearest", "wrap_mode": "clamp"})
         values[p.name] = Texture(texture, scale)
     return model_bsdf(model, values)
