@@ -23,11 +23,11 @@ from . import _math as m
 #: (Mitsuba's MI_ROUGH_TRANSMITTANCE_RES).
 TRANSMITTANCE_RES = 64
 #: The grids over which roughplastic's two precomputed terms are tabulated (:func:`rough_tables`):
-#: (first node, last node, intervals) of ln(alpha) and of eta, spanning the model's bounds
-#: (alpha in [1e-4, 1], int_ior in [1.05, 3]), one more node beyond each end; intervals of each
-#: direction's u axis.
+#: (first node, last node, intervals) of ln(alpha) and of ln(eta - 1), spanning the model's bounds
+#: (alpha in [1e-4, 1], int_ior in [1.05, 3]; the transmittance at grazing angles changes fastest
+#: near eta = 1), one more node beyond each end; intervals of each direction's u axis.
 TABLE_LOG_ALPHA = (math.log(1e-4), 0.0, 48)
-TABLE_ETA = (1.05, 3.0, 64)
+TABLE_LOG_ETA1 = (math.log(0.05), math.log(2.0), 64)
 TABLE_U = 64
 TABLE_FILE = Path(__file__).with_name("_roughplastic_tables.npz")
 
@@ -237,12 +237,11 @@ def _critical_cos(eta):
 @functools.lru_cache(maxsize=None)
 def _u_axes() -> tuple[np.ndarray, np.ndarray]:
     """(start, step) (alpha nodes, directions) of each direction's u axis (see :func:`rough_tables`):
-    TABLE_U intervals over the critical cosines of TABLE_ETA's range, one node beyond each end."""
+    TABLE_U intervals over the critical cosines of TABLE_LOG_ETA1's range, one node beyond each end."""
     mu, _ = _table_directions()
     scale = np.exp(_table_nodes(TABLE_LOG_ALPHA))[:, None]
-    first, last, n = TABLE_ETA
-    h = (last - first) / n
-    c_lo, c_hi = (math.sqrt(1.0 - 1.0 / (e * e)) for e in (first - h, last + h))  # _critical_cos, in NumPy
+    etas = 1.0 + np.exp(_table_nodes(TABLE_LOG_ETA1))
+    c_lo, c_hi = (math.sqrt(1.0 - 1.0 / (e * e)) for e in (etas[0], etas[-1]))  # _critical_cos, in NumPy
     u_lo, u_hi = np.arcsinh((c_lo - mu) / scale), np.arcsinh((c_hi - mu) / scale)
     return u_lo, (u_hi - u_lo) / TABLE_U
 
@@ -252,13 +251,13 @@ def build_rough_tables(path: Path = TABLE_FILE) -> None:
     them to ``path`` (what :func:`rough_tables` reads; run ``python -m brdffit.models._mitsuba_math``
     after changing the grids or the quadratures; about 10 minutes on two cores):
     ``transmittance[a, e, :]``, ``external_transmittance`` at the nodes of TABLE_LOG_ALPHA x
-    TABLE_ETA; ``reflectance[a, k, j]``, ``directional_reflectance`` of table direction k at node j
+    TABLE_LOG_ETA1; ``reflectance[a, k, j]``, ``directional_reflectance`` of table direction k at node j
     of its u axis (:func:`_u_axes`)."""
     trans = jax.jit(jax.vmap(external_transmittance, in_axes=(None, 0)))
     refl = jax.jit(jax.vmap(lambda a, e, mu: directional_reflectance(a, e, mu[None])[0], in_axes=(None, 0, None)))
     mu, _ = _table_directions()
     u_lo, u_step = _u_axes()
-    alphas, etas = np.exp(_table_nodes(TABLE_LOG_ALPHA)), _table_nodes(TABLE_ETA)
+    alphas, etas = np.exp(_table_nodes(TABLE_LOG_ALPHA)), 1.0 + np.exp(_table_nodes(TABLE_LOG_ETA1))
     transmittance = np.array([np.asarray(trans(jnp.float64(a), jnp.asarray(etas))) for a in alphas])
     reflectance = np.zeros((len(alphas), len(mu), TABLE_U + 3))
     for i, a in enumerate(alphas):
@@ -269,13 +268,13 @@ def build_rough_tables(path: Path = TABLE_FILE) -> None:
             # u, one step may leave the cosines' range at small alpha)
             reflectance[i, k] = np.concatenate([[2 * inner[0] - inner[1]], inner, [2 * inner[-1] - inner[-2]]])
     np.savez_compressed(path, transmittance=transmittance.astype(np.float32), reflectance=reflectance.astype(np.float32),
-                        spec=np.asarray([*TABLE_LOG_ALPHA, *TABLE_ETA, TABLE_U]))
+                        spec=np.asarray([*TABLE_LOG_ALPHA, *TABLE_LOG_ETA1, TABLE_U]))
 
 
 @functools.lru_cache(maxsize=None)
 def _rough_table() -> tuple[np.ndarray, np.ndarray]:
     with np.load(TABLE_FILE) as f:
-        if not np.allclose(f["spec"], [*TABLE_LOG_ALPHA, *TABLE_ETA, TABLE_U]):
+        if not np.allclose(f["spec"], [*TABLE_LOG_ALPHA, *TABLE_LOG_ETA1, TABLE_U]):
             raise RuntimeError(f"{TABLE_FILE}: made for other grids; run python -m brdffit.models._mitsuba_math")
         return np.asarray(f["transmittance"], np.float64), np.asarray(f["reflectance"], np.float64)
 
@@ -298,7 +297,7 @@ def _cubic_index(x, first, step, n):
 def rough_tables(alpha, eta):
     """roughplastic's two precomputed terms at (alpha, eta), ``external_transmittance`` (64,) and
     ``internal_reflectance`` (), from tables of Mitsuba's own quadratures (:func:`build_rough_tables`),
-    cubic between nodes: the transmittance over (ln alpha, eta); the internal reflectance as its 64
+    cubic between nodes: the transmittance over (ln alpha, ln(eta - 1)); the internal reflectance as its 64
     directional terms, each over (ln alpha, u) with u = asinh((c - mu) / alpha), c the critical cosine
     of eta: a term changes fast where c crosses its direction's cosine mu, within about alpha (total
     reflection begins there), and u spreads that crossing over many nodes. The quadratures themselves
@@ -306,8 +305,8 @@ def rough_tables(alpha, eta):
     transmittance, reflectance = (jnp.asarray(t, alpha.dtype) for t in _rough_table())
     first, last, n = TABLE_LOG_ALPHA
     ia, wa = _cubic_index(jnp.log(alpha), first, (last - first) / n, n)
-    first_e, last_e, n_e = TABLE_ETA
-    ie, we = _cubic_index(eta, first_e, (last_e - first_e) / n_e, n_e)
+    first_e, last_e, n_e = TABLE_LOG_ETA1
+    ie, we = _cubic_index(jnp.log(eta - 1.0), first_e, (last_e - first_e) / n_e, n_e)
     block = jax.lax.dynamic_slice(transmittance, (ia, ie, jnp.int32(0)), (4, 4, transmittance.shape[2]))
     t = jnp.einsum("a,e,aek->k", wa, we, block)
     # the internal reflectance: each of the 4 alpha nodes' tables at that node's u of every direction

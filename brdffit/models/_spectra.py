@@ -105,9 +105,12 @@ def _spectra(eta_rgb: tuple, k_rgb: tuple) -> tuple[tuple, tuple]:
     eta_rgb, k_rgb = np.asarray(eta_rgb), np.asarray(k_rgb)
     eta, k = (np.asarray(v, np.float64) for v in _solver()(eta_rgb, k_rgb))
     # condition 1 exactly: the smallest change of each spectrum that makes M @ spectrum the RGB value
+    # (alternated with positivity, which that change may break where a spectrum nears 0)
     correct = M.T @ np.linalg.solve(M @ M.T, np.eye(3))
-    eta, k = eta + correct @ (eta_rgb - M @ eta), k + correct @ (k_rgb - M @ k)
-    return tuple(float(v) for v in np.maximum(eta, 0.0)), tuple(float(v) for v in np.maximum(k, 0.0))
+    for _ in range(8):
+        eta = np.maximum(eta + correct @ (eta_rgb - M @ eta), 1e-4)
+        k = np.maximum(k + correct @ (k_rgb - M @ k), 0.0)
+    return tuple(float(v) for v in eta), tuple(float(v) for v in k)
 
 
 def conductor_spectra(eta_rgb, k_rgb) -> tuple[np.ndarray, np.ndarray]:
