@@ -13,13 +13,13 @@ Three kinds of source (SPEC 6):
 How the callback works. Mitsuba dispatches ``bsdf.eval`` through a Dr.Jit virtual call. With
 ``JitFlag.SymbolicCalls`` off (set by :func:`evaluated_calls`) the call is *evaluated*: Dr.Jit runs
 the kernel up to the call, hands the Python method concrete arrays holding only the lanes that
-reached this BSDF, and the method may leave Dr.Jit (to NumPy, to JAX) and come back. In the
-``scalar_rgb`` fallback every sample calls the method with scalars: correct, but slow.
+reached this BSDF, and the method may leave Dr.Jit (to NumPy) and come back. In the ``scalar_rgb``
+fallback every sample calls the method with scalars: correct, but slow.
 
 Conventions at the boundary (SPEC 1): in Mitsuba's ``eval(ctx, si, wo)``, ``si.wi`` points to the
 camera (our ``wo``, the view) and ``wo`` points to the light (our ``wi``), both in the local
-shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). This module is the only place
-that converts between the two.
+shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). The callback here and the symbolic
+BSDF (:mod:`brdffit.render.symbolic_bsdf`) are the only places that convert between the two.
 """
 
 from __future__ import annotations
