@@ -151,3 +151,50 @@ def test_a_scalar_variant_runs_straight_line_code_per_ray():
     assert run.returncode == 0, run.stderr[-2000:]
     calls, value = run.stdout.split()
     assert float(value) > 0 and int(calls) <= 40, calls
+
+
+SAMPLING = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    import mitsuba as mi
+    mi.set_variant(sys.argv[1])
+    import brdffit
+    brdffit.register_mitsuba()
+    bsdf = mi.load_dict(brdffit.mitsuba_bsdf("lambert+ggx+ggx", {"kd": 0.2, "ggx1.ks": 0.6, "ggx1.alpha": 0.1,
+        "ggx1.f0": 0.9, "ggx2.ks": 0.6, "ggx2.alpha": 0.5, "ggx2.f0": 0.9}))
+    rng = np.random.default_rng(5)
+    n = 200
+    s1, s2 = rng.random(n), rng.random((n, 2))
+    cos = rng.uniform(0.05, 1.0, n)
+    wi = np.stack([np.sqrt(1 - cos**2) * np.cos(7 * s1), np.sqrt(1 - cos**2) * np.sin(7 * s1), cos], -1)
+    ctx = mi.BSDFContext()
+    out = []
+    if mi.variant().startswith("scalar"):
+        for k in range(n):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wi[k])
+            bs, weight = bsdf.sample(ctx, si, float(s1[k]), mi.Point2f(*s2[k]))
+            pdf = bsdf.pdf(ctx, si, bs.wo)
+            out.append([bs.wo.x, bs.wo.y, bs.wo.z, bs.pdf, pdf, weight[0], weight[1]])
+    else:
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(mi.Float(wi[:, c]) for c in range(3)))
+        bs, weight = bsdf.sample(ctx, si, mi.Float(s1), mi.Point2f(mi.Float(s2[:, 0]), mi.Float(s2[:, 1])))
+        pdf = bsdf.pdf(ctx, si, bs.wo)
+        out = np.stack([np.asarray(x) for x in (bs.wo.x, bs.wo.y, bs.wo.z, bs.pdf, pdf, weight[0], weight[1])], -1).tolist()
+    print("RESULT", json.dumps(np.asarray(out, np.float64).tolist()))
+""")
+
+
+def test_scalar_sampling_is_the_jit_variants():
+    """The scalar variants take their own paths through the lobe mixture (one ray: the lobe chosen
+    first, weights from plain numbers): the same directions, densities and weights as the LLVM
+    variant, sample for sample (a three-lobe mixture: cosine and two GGX)."""
+    got = {}
+    for variant in ("scalar_rgb", "llvm_ad_rgb"):
+        run = subprocess.run([sys.executable, "-c", SAMPLING, variant], capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0 and "RESULT " in run.stdout, run.stdout[-1000:] + run.stderr[-2000:]
+        got[variant] = np.asarray(json.loads(run.stdout.rsplit("RESULT ", 1)[1].splitlines()[0]))
+    scalar, jit = got["scalar_rgb"], got["llvm_ad_rgb"]
+    assert np.mean(scalar[:, 3] > 0) > 0.8 and len(np.unique(np.round(scalar[:, 2], 3))) > 50
+    np.testing.assert_allclose(scalar, jit, rtol=2e-3, atol=1e-5)
