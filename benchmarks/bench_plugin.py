@@ -16,7 +16,9 @@ depth 8) in a fresh process -- so that peak memory (ru_maxrss) is the case's own
   measured (RGL)          Mitsuba's measured plugin on a shared RGL file (RGB variants, data present)
 
 The scalar variants render a smaller image (their renders take seconds per case); ratios are within
-one variant, in this run (the machine may be shared: compare ratios, not seconds).
+one variant, in this run (the machine may be shared: compare ratios, not seconds): "x time" and
+"x memory" against native roughconductor, "x floor" against the Python floor -- in the scalar
+variants Mitsuba calls a Python BSDF per ray from its render threads, which share one interpreter.
 
     .venv/bin/python benchmarks/bench_plugin.py [--variants ...] [--models ...] [--size 128] [--spp 16]
 """
@@ -128,24 +130,27 @@ def main() -> None:
     args = ap.parse_args()
     data = Path(os.environ.get("BRDFFIT_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
     rgl = data / "measured" / "rgl" / "vch_golden_yellow_rgb.bsdf"
-    print(f"{'variant':14s} {'case':30s} {'image':>9s} {'seconds':>8s} {'x time':>7s} {'peak MB':>8s} {'x memory':>8s}")
+    print(f"{'variant':26s} {'case':32s} {'image':>10s} {'seconds':>8s} {'x time':>7s} {'x floor':>7s} {'peak MB':>8s} "
+          f"{'x memory':>8s}")
     for variant in args.variants:
         scalar = variant.startswith("scalar")
         size, spp = (args.scalar_size, args.scalar_spp) if scalar else (args.size, args.spp)
-        cases = ["native roughconductor", "native roughplastic", "native principled"]
-        cases += [f"brdffit {m}" for m in args.models] + ["brdffit lambert+ggx maps", "python floor"]
+        cases = ["native roughconductor", "python floor", "native roughplastic", "native principled"]
+        cases += [f"brdffit {m}" for m in args.models] + ["brdffit lambert+ggx maps"]
         if "rgb" in variant and rgl.is_file():
             cases.append("measured (RGL)")
-        base = None
+        base = floor = None
         for case in cases:
             r = run_case(variant, case, size, spp, rgl)
             if isinstance(r, str):
-                print(f"{variant:14s} {case:30s} failed: {r[:120]}")
+                print(f"{variant:26s} {case:32s} failed: {r[:120]}")
                 continue
             base = base or r
-            print(f"{variant:14s} {case:30s} {f'{size}x{size}x{spp}':>9s} {r['seconds']:8.3f} "
-                  f"{r['seconds'] / base['seconds']:7.1f} {r['maxrss_mb']:8.0f} {r['maxrss_mb'] / base['maxrss_mb']:8.2f}",
-                  flush=True)
+            floor = r if case == "python floor" else floor
+            x_floor = f"{r['seconds'] / floor['seconds']:7.1f}" if floor else f"{'':7s}"
+            print(f"{variant:26s} {case:32s} {f'{size}x{size}x{spp}':>10s} {r['seconds']:8.3f} "
+                  f"{r['seconds'] / base['seconds']:7.1f} {x_floor} {r['maxrss_mb']:8.0f} "
+                  f"{r['maxrss_mb'] / base['maxrss_mb']:8.2f}", flush=True)
 
 
 if __name__ == "__main__":
