@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: setup setup-blender demo test bench clean mutation mutation-by-hand
+.PHONY: setup setup-blender setup-gltf-validator demo test bench clean mutation mutation-by-hand
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	PYTHON=$(PYTHON) bash scripts/setup.sh
@@ -17,10 +17,15 @@ setup: $(STAMP)
 setup-blender:
 	PYTHON=$(PYTHON) bash scripts/setup_blender.sh
 
+# The Khronos glTF-Validator (npm, pure JavaScript) in .node-tools, for the glTF export tests; only
+# warns where node/npm are missing (those tests are then skipped with a line saying so).
+setup-gltf-validator:
+	bash scripts/setup_gltf_validator.sh
+
 demo: $(STAMP)
 	$(VENV)/bin/brdffit demo -o out/demo --force
 
-test: $(STAMP) setup-blender
+test: $(STAMP) setup-blender setup-gltf-validator
 	$(VENV)/bin/python -m pytest -n 2 --dist loadfile -q
 
 bench: $(STAMP)

@@ -7,11 +7,16 @@ parts of brdffit that compute with JAX enable ``jax_enable_x64`` when they are f
 
 from __future__ import annotations
 
-import importlib
+from . import _interrupt
 
-from . import _wiring  # noqa: F401 - what the higher layers provide to the lower ones (brdffit/_providers.py)
-from .errors import InputError, UsageError
-from .grid import ubo_angles, ubo_directions, ubo_pairs
+if _interrupt.is_the_executable():  # the `brdffit` command: Ctrl-C from its first moment is one line, 130
+    _interrupt.end_process_on_interrupt()
+
+import importlib  # noqa: E402
+
+from . import _wiring  # noqa: F401,E402 - what the higher layers provide to the lower ones (brdffit/_providers.py)
+from .errors import InputError, UsageError  # noqa: E402
+from .grid import ubo_angles, ubo_directions, ubo_pairs  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -39,6 +44,7 @@ _LAZY = {
     "BTF": "brdffit.btf",
     "load_btf": "brdffit.btf",
     "fit_btf": "brdffit.btf",
+    "fit_btf_database": "brdffit.btf",
     "ParameterMaps": "brdffit.btf",
     "validate_btf": "brdffit.btf",
     "BTFValidation": "brdffit.btf",
@@ -46,6 +52,8 @@ _LAZY = {
     "render_scene": "brdffit.scene",
     "validate_scene": "brdffit.scene",
     "Usage": "brdffit.scene",
+    "explore": "brdffit.explorer",
+    "Explorer": "brdffit.explorer",
 }
 # brdffit.plot is a module: `import brdffit.plot` or `brdffit.plot` after first use (lazy, below)
 

@@ -11,6 +11,12 @@
 - Hidden entries ``.NAME.brdffit-*`` are this module's. A run killed at any point can leave some
   behind; the next run on the same target, holding the lock, removes them (and puts back an old
   result that a non-atomic fallback swap had set aside).
+- What a file holds is valid for its format whatever the data: :func:`json_text` writes strict
+  JSON (a non-finite number is null), :func:`plain_text` removes the characters no text file may
+  hold (controls, lone surrogates) from names written into files.
+- The ``brdffit`` executable's Ctrl-C (``brdffit._interrupt``) ends the process at once and removes
+  what this run wrote (:func:`remove_this_runs_outputs`), its scratch folders (:func:`scratch_dir`)
+  and its helper processes (:func:`start_process`) included.
 """
 
 from __future__ import annotations
@@ -19,7 +25,10 @@ import contextlib
 import ctypes
 import errno
 import fcntl
+import json
+import math
 import os
+import re
 import shutil
 import tempfile
 import threading
@@ -46,6 +55,10 @@ STOP_REQUESTED = threading.Event()
 _GUARD = threading.RLock()
 _RESERVED: dict[str, Path] = {}
 _COMMITTED: list[Path] = []
+#: This run's scratch folders (:func:`scratch_dir`) and helper processes (:func:`start_process`),
+#: stopped and removed by :func:`remove_this_runs_outputs` (also under ``_GUARD``).
+_SCRATCH: list[Path] = []
+_PROCESSES: list = []
 
 
 def read_input(path: str | os.PathLike, expected: str) -> bytes:
@@ -278,6 +291,13 @@ def remove_this_runs_outputs(timeout: float = 10.0) -> None:
     up to ``timeout`` s for a commit in progress; the caller then ends the process (``os._exit``),
     so ``_GUARD`` stays held and nothing is committed after this."""
     _GUARD.acquire(timeout=timeout)
+    for proc in _PROCESSES:  # first, so that none writes into a scratch folder being removed
+        with contextlib.suppress(OSError):
+            proc.kill()
+        with contextlib.suppress(Exception):
+            proc.wait(timeout=timeout)
+    for path in _SCRATCH:
+        shutil.rmtree(path, ignore_errors=True)
     for path in _COMMITTED:
         _remove(path)
     for key, lock in list(_RESERVED.items()):
@@ -286,3 +306,77 @@ def remove_this_runs_outputs(timeout: float = 10.0) -> None:
             _remove(entry)
         with contextlib.suppress(OSError):
             lock.unlink()
+
+
+# -- scratch folders and helper processes ---------------------------------------------------------
+def scratch_dir(prefix: str) -> Path:
+    """A new private folder in the system's temporary folder for this run's intermediate files;
+    the caller removes it (:func:`remove_scratch`), a Ctrl-C of the executable does too. Made and
+    listed in one step, so that no moment of an interrupt leaves it behind."""
+    with _GUARD:
+        path = Path(tempfile.mkdtemp(prefix=prefix))
+        _SCRATCH.append(path)
+    return path
+
+
+def remove_scratch(path: Path) -> None:
+    with _GUARD:
+        shutil.rmtree(path, ignore_errors=True)
+        with contextlib.suppress(ValueError):
+            _SCRATCH.remove(path)
+
+
+def start_process(argv: list[str], **popen_options):
+    """``subprocess.Popen(argv, **popen_options)``, a helper process of this run: in a session of
+    its own (a terminal's Ctrl-C reaches brdffit, which stops it before removing its scratch
+    folders, rather than the helper dying on its own while it writes), and listed in the same step
+    as it starts. :func:`forget_process` once it has ended."""
+    import subprocess
+
+    with _GUARD:
+        proc = subprocess.Popen(argv, start_new_session=True, **popen_options)
+        _PROCESSES.append(proc)
+    return proc
+
+
+def forget_process(proc) -> None:
+    with _GUARD, contextlib.suppress(ValueError):
+        _PROCESSES.remove(proc)
+
+
+# -- what a file may hold ---------------------------------------------------------------------------
+#: Characters no text file of brdffit's formats may hold: XML 1.0 forbids the C0 controls other than
+#: tab, newline and carriage return, lone surrogates, U+FFFE and U+FFFF (and UTF-8 cannot encode a
+#: lone surrogate at all); DEL and the C1 controls are discouraged and never part of a name.
+_NOT_TEXT = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\ud800-\udfff\ufffe\uffff]")
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def plain_text(text) -> str:
+    """``str(text)`` with every character no text file may hold (see ``_NOT_TEXT``) replaced by
+    U+FFFD: a name taken from data (a measurement's, a fit's) written into any file."""
+    return _NOT_TEXT.sub("\ufffd", str(text))
+
+
+def strict_json(value):
+    """``value`` as strict JSON holds it: a non-finite number (NaN, inf) becomes null, tuples and
+    NumPy arrays lists, NumPy scalars numbers; a lone surrogate in a string (valid Python, not
+    Unicode: a UTF-8 reader refuses it) becomes U+FFFD (JSON escapes the controls)."""
+    if value is None or isinstance(value, bool | int):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, str):
+        return _SURROGATE.sub("\ufffd", value)
+    if isinstance(value, dict):
+        return {strict_json(str(k)): strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v) for v in value]
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        return strict_json(value.tolist())
+    raise TypeError(f"no JSON form for {type(value).__name__} {value!r:.60}")
+
+
+def json_text(value, indent: int | None = None, sort_keys: bool = False) -> str:
+    """Strict JSON text of ``value`` (:func:`strict_json`): any JSON reader takes it."""
+    return json.dumps(strict_json(value), indent=indent, sort_keys=sort_keys, allow_nan=False)

@@ -3,6 +3,8 @@
 # Mitsuba's LLVM back end needs libLLVM >= 16 (with 14/15 alone it aborts the process), so on
 # Debian/Ubuntu, as root, this also installs libllvm19 when no libLLVM >= 16 is present.
 # Without one, brdffit still runs: it falls back to a scalar Mitsuba variant with a warning.
+# The explorer's browser test (tests/test_explore_browser.py) drives Debian's chromium: installed
+# the same way (root and apt-get) when /usr/bin/chromium is missing; elsewhere that test is skipped.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
@@ -28,6 +30,19 @@ if ! have_llvm16; then
     else
         echo "setup: warning: no libLLVM >= 16 found and cannot install one (need root + apt);" \
              "brdffit will render with the slower scalar Mitsuba variant"
+    fi
+fi
+
+if [ ! -x /usr/bin/chromium ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing chromium for the explorer's browser test"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -q chromium >/dev/null 2>&1 \
+            || { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q chromium >/dev/null 2>&1; } \
+            || echo "setup: warning: could not install chromium; the explorer's browser test will fail"
+    else
+        echo "setup: warning: no /usr/bin/chromium and cannot install it (need root + apt);" \
+             "the explorer's browser test is skipped"
     fi
 fi
 

@@ -334,7 +334,7 @@ def _type_ok(field: str, value) -> bool:
     if field in ("loss", "status", "solver", "data_name"):
         return isinstance(value, str)
     if field == "loss_value":
-        return number
+        return number or value is None  # null: a loss that was not a number, as strict JSON writes it
     if field == "converged":
         return isinstance(value, bool)
     if field in ("metrics", "seconds", "excluded", "stderr", "start", "options"):

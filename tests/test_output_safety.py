@@ -351,3 +351,95 @@ def test_reserve_is_reentrant_and_atomic_dir_without_force_refuses_existing(tmp_
         with atomic_dir(out):
             pass
     assert hidden(tmp_path) == []
+
+
+# -- Ctrl-C before the command runs, export's output taken before its work ----------------------------
+CTRL_C_IN_THE_PACKAGES_IMPORTS = r"""
+import runpy, signal, sys, time
+
+exe, sample = sys.argv[1], sys.argv[2]
+
+
+class CtrlCDuringImport:  # Ctrl-C while `brdffit` imports its package (NumPy, ...), before any command
+    def find_spec(self, name, path=None, target=None):
+        if name == "brdffit.grid":
+            signal.raise_signal(signal.SIGINT)
+            time.sleep(30)  # the import goes on
+        return None
+
+
+sys.meta_path.insert(0, CtrlCDuringImport())
+sys.argv = [exe, "info", sample]
+runpy.run_path(exe, run_name="__main__")  # the console script, as the shell runs it
+"""
+
+
+def test_ctrl_c_in_the_first_moments_is_one_line_and_130(tmp_path):
+    """Ctrl-C in the executable's first 0.2 s, while its package imports: one line and 130 (it was a
+    KeyboardInterrupt traceback and -2)."""
+    exe = Path(sys.executable).with_name("brdffit")
+    if not exe.exists():
+        pytest.skip("needs the installed brdffit executable")
+    r = subprocess.run([sys.executable, "-c", CTRL_C_IN_THE_PACKAGES_IMPORTS, str(exe), str(SAMPLE)],
+                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=_deliverable_sigint)
+    assert (r.returncode, r.stderr) == (130, "brdffit: interrupted\n")
+    assert r.stdout == ""
+
+
+def _export_fits(tmp_path: Path) -> tuple[Path, Path]:
+    """A ggx fit.json (exported to glTF through a conversion: seconds of work) and a glTF one (none)."""
+    ggx, gltf = tmp_path / "ggx", tmp_path / "gltf"
+    ggx.mkdir()
+    gltf.mkdir()
+    (ggx / "fit.json").write_text(json.dumps({"model": "ggx", "converged": True, "loss": "log", "params": {
+        "kd": [0.2, 0.3, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.3], "f0": [0.1]}}))
+    (gltf / "fit.json").write_text(json.dumps({"model": "gltf:metallic_roughness", "converged": True, "params": {
+        "base_color": [0.8, 0.4, 0.2], "metallic": [0.3], "roughness": [0.45]}}))
+    return ggx / "fit.json", gltf / "fit.json"
+
+
+def test_a_second_export_to_a_file_being_written_exits_2(tmp_path, monkeypatch, capsys):
+    """Of two ``export --force`` to one file at once, one proceeds and the other exits 2 (README).
+    Before, the output was locked only while the finished file was moved in place, so every run
+    exited 0 (four concurrent exports: four exit 0, the last one's file kept)."""
+    import brdffit.materials as materials
+
+    ggx, gltf = _export_fits(tmp_path)
+    out = tmp_path / "paint.gltf"
+    real_convert, second = materials.convert, {}
+
+    def convert_while_another_export_runs(*args, **kwargs):
+        r = subprocess.run([*brdffit_cmd(), "export", str(gltf), "-o", str(out), "--force"], capture_output=True,
+                           text=True, env=ENV, timeout=300)
+        second.update(code=r.returncode, err=r.stderr)
+        return real_convert(*args, **kwargs)
+
+    monkeypatch.setattr(materials, "convert", convert_while_another_export_runs)
+    assert main(["export", str(ggx), "--to", "gltf:metallic_roughness", "-o", str(out), "--force"]) == 0
+    assert second["code"] == 2, second
+    assert second["err"].count("\n") == 1 and "another brdffit run is writing it now" in second["err"]
+    kept = json.loads(out.read_text())["materials"][0]["extras"]["brdffit"]
+    assert kept["converted_from"]["model"] == "ggx"  # the run that proceeded wrote it
+    assert hidden(tmp_path) == []
+
+
+@pytest.mark.parametrize("api", [False, True])
+def test_export_takes_its_output_before_converting(tmp_path, monkeypatch, capsys, api):
+    """An output that cannot be written is refused before the conversion's seconds of work (it was
+    found after them)."""
+    import brdffit.materials as materials
+    from brdffit.fitting.result import FitResult
+
+    def must_not_run(*a, **k):
+        raise AssertionError("the conversion ran before the output was checked")
+
+    monkeypatch.setattr(materials, "convert", must_not_run)
+    ggx, _ = _export_fits(tmp_path)
+    out = "/proc/brdffit-no/paint.gltf"
+    if api:
+        with pytest.raises(UsageError, match="cannot write here"):
+            FitResult.from_json(ggx).export(out, to="gltf:metallic_roughness")
+        return
+    assert main(["export", str(ggx), "--to", "gltf:metallic_roughness", "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write here" in err and "Traceback" not in err

@@ -2,7 +2,8 @@
 
 - ``python`` blocks run as scripts; the one made of ``# conftest.py`` and ``# test_*.py`` parts is
   written out as those files and run by pytest against the shared data (skipped, with the reason,
-  without them).
+  without them). A block whose first line is ``# needs: PROGRAM`` (``sbatch``: a SLURM cluster) runs
+  where that program is found; elsewhere it must compile and every module it imports be installed.
 - ``sh`` blocks are checked with ``bash -n``. They start long runs (``make demo`` / ``make test``
   set up a venv; ``brdffit fit/validate/compare`` on real data take minutes), so they are not
   run: every ``make`` target must exist (``make -n`` parses it), and every ``brdffit`` sub-command
@@ -12,9 +13,12 @@
 
 from __future__ import annotations
 
+import ast
+import importlib.util
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -25,6 +29,7 @@ from conftest import REPO, data_dir
 
 README = REPO / "README.md"
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.S | re.M)
+NEEDS = re.compile(r"^# needs: (\S+)\n")
 
 
 def blocks(lang: str) -> list[str]:
@@ -58,6 +63,9 @@ def test_readme_has_the_blocks_this_test_checks():
 def test_python_blocks_run_as_written(tmp_path):
     scripts = [b for b in blocks("python") if not _split_files(b)]
     for k, block in enumerate(scripts):
+        need = NEEDS.match(block)
+        if need and shutil.which(need.group(1)) is None:
+            continue  # test_blocks_that_need_a_missing_program_compile_and_import
         path = tmp_path / f"block{k}.py"
         path.write_text(block)
         run = subprocess.run([sys.executable, str(path)], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
@@ -65,6 +73,20 @@ def test_python_blocks_run_as_written(tmp_path):
         assert run.returncode == 0, f"README python block {k} failed:\n{block}\n{run.stderr[-3000:]}"
     assert (tmp_path / "fit.json").exists() and (tmp_path / "pareto.png").stat().st_size > 10_000
     assert (tmp_path / "validation" / "metrics.json").exists()
+
+
+def test_blocks_that_need_a_missing_program_compile_and_import():
+    """The blocks this machine cannot run (``# needs: sbatch``) are still Python that compiles, and
+    every module they import is installed (the SLURM example's ``dask_jobqueue``: brdffit[cluster])."""
+    needing = [b for b in blocks("python") if NEEDS.match(b)]
+    assert needing, "the SLURM example is missing"
+    for block in needing:
+        tree = ast.parse(block)
+        names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+        names += [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module]
+        assert names
+        for name in names:
+            assert importlib.util.find_spec(name.split(".")[0]) is not None, f"{name} is not installed:\n{block}"
 
 
 @pytest.mark.slow

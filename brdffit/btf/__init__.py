@@ -1,6 +1,7 @@
 """Per-texel fitting of UBO BTFs (SPEC 7): read (:func:`load_btf`), fit (:func:`fit_btf` ->
-:class:`ParameterMaps`), validate against the BTF's own photographs (:func:`validate_btf`), and
-generated test BTFs (:mod:`brdffit.btf.generate`)."""
+:class:`ParameterMaps`; here, on ``jax.distributed`` processes or a Dask cluster), fit a folder of
+BTFs (:func:`fit_btf_database`), validate against the BTF's own photographs (:func:`validate_btf`),
+and generated test BTFs (:mod:`brdffit.btf.generate`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ _LAZY = {
     "load_btf": "brdffit.btf.reader",
     "ParameterMaps": "brdffit.btf.maps",
     "fit_btf": "brdffit.btf.fit",
+    "fit_btf_database": "brdffit.btf.database",
+    "DatabaseFit": "brdffit.btf.database",
     "validate_btf": "brdffit.btf.validate",
     "BTFValidation": "brdffit.btf.validate",
 }

@@ -1,34 +1,34 @@
 """``brdffit.fit_btf``: every texel of a BTF fitted on its own (SPEC 7).
 
 The work unit is a *tile* of the BTF's cache (16 x 16 texels by default, see
-:mod:`brdffit.btf.reader`): its texels are read with one sequential read and fitted together by
-``fit_batch``'s array-level core (``brdffit.fitting.batch.solve_batch``: the program of ``fit``
-mapped over the texels, spread over the process's JAX devices; no FitResult per texel, the maps
-need only the parameters, loss, status and steps).
+:mod:`brdffit.btf.reader`), fitted by :func:`brdffit.btf.tile.fit_tile` (one read, the texels
+fitted together, neighbouring texels' results as starts). A run (:class:`TileRun`) takes the
+tiles that are not finished yet, has them fitted, and assembles the maps; where the tiles are
+fitted is one of three:
 
-Resuming. With ``out=DIR``, every finished tile is written at once (atomically) to
-``DIR/tiles/tile_NNNNN.npz``, beside ``DIR/tiles/run.json`` which identifies the run (the BTF's
-content signature, model, loss, solver and options). A run that finds tiles of the same run
-there fits only the missing ones; tiles of a different run are an error unless ``force``. When
-all tiles are done the results (``params.exr``, previews, ``summary.json``, see
+- here, one after another on this process's JAX devices (the default);
+- by the processes of a ``jax.distributed`` run (e.g. one per machine or per GPU, started by the
+  user's launcher: SLURM, mpirun, Kubernetes, or by hand, each having called
+  ``jax.distributed.initialize(...)``): process p of n fits the tiles t with t % n == p on its own
+  devices, then the maps are gathered (``multihost_utils.process_allgather``) so that every
+  process returns the whole ``ParameterMaps``; process 0 alone writes the files. Every process
+  must be able to read the BTF (a shared file system, or its own copy);
+- by the workers of a Dask cluster (``client=``, :mod:`brdffit.btf.cluster`): one task per tile.
+
+The fitted numbers do not depend on where: each texel is fitted by the same compiled code from the
+same data, so one process, several, or a Dask cluster give identical maps (tested bit for bit).
+
+Resuming (:mod:`brdffit.btf.run`). With ``out=DIR``, every finished tile is written at once
+(atomically) to ``DIR/tiles/tile_NNNNN.npz`` beside ``DIR/tiles/run.json``, which identifies the
+run; a run that finds tiles of the same run there fits only the missing ones, whichever way those
+were fitted. When all tiles are done the results (``params.exr``, previews, ``summary.json``, see
 :mod:`brdffit.btf.maps`) are written and the tiles removed.
-
-Several processes (``jax.distributed``). When JAX runs several processes (after
-``jax.distributed.initialize(...)``, e.g. one per machine or per GPU, started by the user's
-launcher: SLURM, mpirun, Kubernetes, or by hand), process p of n fits the tiles t with
-t % n == p on its own devices, then the maps are gathered (``multihost_utils.process_allgather``)
-so that every process returns the whole ``ParameterMaps``; process 0 alone writes the files.
-Every process must be able to read the BTF (a shared file system, or its own copy). The fitted
-numbers do not depend on the split: each texel is fitted by the same compiled code from the same
-data, so one process and several give identical maps.
-
-How a tile's texels are fitted (neighbouring texels' results as starts): :mod:`brdffit.btf.tile`.
 """
 
 from __future__ import annotations
 
-import json
-import os
+import contextlib
+import dataclasses
 import shutil
 import sys
 import time
@@ -39,34 +39,49 @@ import numpy as np
 from .._progress import progress_bar
 from ..errors import UsageError
 from ..fitting.problem import resolve_model
+from . import run as _run
 from . import tile as _tile
 from .maps import ParameterMaps
 from .reader import BTF
 
-RUN_FILE = "run.json"
 #: fit_btf's keyword options (``FitOptions``' fields that a batch takes).
 _OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes", "multistart", "bounds", "fixed", "physical")
-def _tile_file(folder: Path, t: int) -> Path:
-    return folder / f"tile_{t:05d}.npz"
 
 
-def _save_tile(folder: Path, t: int, arrays: dict) -> None:
-    target = _tile_file(folder, t)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    os.replace(tmp, target)
+@dataclasses.dataclass(frozen=True, eq=False)
+class TileJob:
+    """What fits a tile, the same wherever it is fitted: the resolved model and options, and the
+    neighbour starts; ``record`` identifies the run (``run.json``)."""
+
+    model: object
+    options: object
+    neighbours: bool
+    record: dict
 
 
-def _load_tile(folder: Path, t: int) -> dict | None:
-    f = _tile_file(folder, t)
-    if not f.is_file():
-        return None
-    try:
-        with np.load(f) as z:
-            return {k: z[k] for k in z.files}
-    except Exception:  # noqa: BLE001 - a damaged tile is fitted again
-        return None
+def tile_job(btf: BTF, model, loss: str = "log", solver: str | None = None, neighbours: bool = True,
+             **batch_options) -> TileJob:
+    """Check and resolve ``fit_btf``'s arguments once (see :func:`fit_btf`)."""
+    if not isinstance(btf, BTF):
+        raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
+    options, batch_options = fit_options(loss, solver, batch_options)
+    mdl = resolve_model(model, btf.channels)
+    record = {"btf": btf.signature(), "model": mdl.name, "loss": options.loss,
+              "options": {k: str(v) for k, v in sorted(batch_options.items())}, "neighbours": bool(neighbours),
+              "tile": btf.tile, "shape": [btf.height, btf.width]}
+    return TileJob(mdl, options, bool(neighbours), record)
+
+
+def fit_options(loss: str, solver: str | None, batch_options: dict):
+    """``FitOptions`` of a BTF's fits from ``fit_btf``'s arguments (checked), and the options as
+    given (``solver`` among them) for the run's record."""
+    from ..fitting.options import FitOptions
+
+    given = {**batch_options, **({} if solver is None else {"solver": solver})}
+    unknown = sorted(set(given) - set(_OPTIONS))
+    if unknown:
+        raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
+    return FitOptions(loss=loss, **{"chunk": _tile.GROUP, **given}).batched("fit_btf"), given
 
 
 def fit_btf(
@@ -80,6 +95,7 @@ def fit_btf(
     progress: bool | None = None,
     max_tiles: int | None = None,
     neighbours: bool = True,
+    client=None,
     **batch_options,
 ) -> ParameterMaps:
     """Fit ``model`` to every texel of ``btf``; see the module docstring.
@@ -90,112 +106,127 @@ def fit_btf(
     the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
     ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
     splitting work by hand). ``neighbours``: start most texels from a fitted neighbour's result
-    (see the module docstring); False starts every texel from the initialisation grid.
+    (see :mod:`brdffit.btf.tile`); False starts every texel from the initialisation grid.
+    ``client``: a ``dask.distributed.Client``; its cluster's workers fit the tiles (see
+    :mod:`brdffit.btf.cluster`: ``out`` must then be on a file system the workers share).
     """
+    job = tile_job(btf, model, loss, solver, neighbours, **batch_options)
+    with open_run(btf, job, out=out, force=force, client=client) as run:
+        enabled = sys.stderr.isatty() if progress is None else bool(progress)
+        label = f"{job.model.name} on {btf.name}" + (f" (process {run.pid + 1}/{run.nproc})" if run.nproc > 1 else "")
+        with progress_bar(label, run.texels(run.mine), shown=enabled, done=run.texels(run.results),
+                          rate="texels") as bar:
+            return run.fit(bar, max_tiles=max_tiles)
+
+
+@contextlib.contextmanager
+def open_run(btf: BTF, job: TileJob, *, out=None, force: bool = False, client=None):
+    """A :class:`TileRun` of ``job`` over ``btf``, its folder ``out`` checked, locked and read (the
+    tiles finished before); the lock is released when the block ends."""
     import jax
 
-    from ..fitting.options import FitOptions
-
-    if not isinstance(btf, BTF):
-        raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
-    if solver is not None:
-        batch_options["solver"] = solver
-    unknown = sorted(set(batch_options) - set(_OPTIONS))
-    if unknown:
-        raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
-    options = FitOptions(loss=loss, **{"chunk": _tile.GROUP, **batch_options}).batched("fit_btf")
-    loss = options.loss
-    mdl = resolve_model(model, btf.channels)
-    run = {"btf": btf.signature(), "model": mdl.name, "loss": loss, "options": {k: str(v) for k, v in sorted(batch_options.items())},
-           "neighbours": bool(neighbours),
-           "tile": btf.tile, "shape": [btf.height, btf.width]}
-    pid, nproc = jax.process_index(), jax.process_count()
-
-    tiles_dir = None
-    if out is not None:
-        out = Path(out)
-        if (out / "params.exr").exists() and not force:
-            raise UsageError(f"{out}: already holds a fit (use --force / force=True to replace it)")
-        tiles_dir = out / "tiles"
-        run_file = tiles_dir / RUN_FILE
-        if run_file.is_file():
-            try:
-                previous = json.loads(run_file.read_text())
-            except (OSError, ValueError):
-                previous = None
-            if previous != run:
-                if not force:
-                    raise UsageError(f"{tiles_dir}: holds tiles of another run (other BTF, model or options); "
-                                     "use --force / force=True to start again")
-                if pid == 0:
-                    shutil.rmtree(tiles_dir, ignore_errors=True)
-        _barrier(nproc, "brdffit-fit-btf-clean")
-        tiles_dir.mkdir(parents=True, exist_ok=True)
-        if pid == 0:
-            lock = _lock(tiles_dir)
-        if pid == 0 and not run_file.is_file():
-            tmp = run_file.with_name(f".{RUN_FILE}.tmp")
-            tmp.write_text(json.dumps(run))
-            os.replace(tmp, run_file)
-
-    mine = [t for t in range(btf.n_tiles) if t % nproc == pid]
-    results: dict[int, dict] = {}
-    for t in mine:
-        if tiles_dir is not None:
-            got = _load_tile(tiles_dir, t)
-            if got is not None:
-                results[t] = got
-    todo = [t for t in mine if t not in results]
-    sizes = {t: (lambda b: (b[1] - b[0]) * (b[3] - b[2]))(btf.tile_box(t)) for t in mine}
-    enabled = sys.stderr.isatty() if progress is None else bool(progress)
-    label = f"{mdl.name} on {btf.name}" + (f" (process {pid + 1}/{nproc})" if nproc > 1 else "")
-    t0 = time.perf_counter()
-    fitted = 0
-    with progress_bar(label, sum(sizes.values()), shown=enabled, done=sum(sizes[t] for t in results),
-                      rate="texels") as bar:
-        for t in todo:
-            if max_tiles is not None and fitted >= max_tiles:
-                return None
-            arrays = _tile.fit_tile(btf, t, mdl, options, neighbours)
-            if tiles_dir is not None:
-                _save_tile(tiles_dir, t, arrays)
-            results[t] = arrays
-            fitted += 1
-            bar.advance(sizes[t])
-    seconds = time.perf_counter() - t0
-    n_fitted = sum(sizes[t] for t in todo)
-
-    maps = _assemble(btf, mdl, results)
-    if nproc > 1:
-        maps = _gather(maps, btf, mine)
-    info = {"btf": btf.name, "source": btf.source, "btf_options": btf.meta.get("options", {}), "processes": nproc,
-            "devices": [str(d) for d in jax.devices()],
-            "texels_fitted_now": int(n_fitted) if nproc == 1 else None,
-            "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
-            "resumed_tiles": len(mine) - len(todo), "neighbours": bool(neighbours)}
-    pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],
-                       steps=maps["steps"], loss_name=loss, solver=options.solver,
-                       info=info)
-    if out is not None and pid == 0:
-        pm.save(out, force=True)
-        shutil.rmtree(tiles_dir, ignore_errors=True)
-        lock.close()
-    _barrier(nproc, "brdffit-fit-btf-done")
-    return pm
-
-
-def _lock(tiles_dir: Path):
-    """An exclusive lock on the run's tile folder (released when the process ends, even killed):
-    a second run writing the same place at once is refused instead of mixing tiles."""
-    import fcntl
-
-    f = open(tiles_dir / ".lock", "w")
+    nproc = jax.process_count()
+    if client is not None and nproc > 1:
+        raise UsageError("fit_btf: client= (a Dask cluster) and jax.distributed processes: use one of them")
+    pid = jax.process_index()
+    barrier = (lambda name: _barrier(nproc, name))
+    tiles_dir, held = None, None
     try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        f.close()
-        raise UsageError(f"{tiles_dir.parent}: another fit-btf run is writing there") from None
-    return f
+        if out is not None:
+            out = Path(out)
+            if (out / "params.exr").exists() and not force:
+                raise UsageError(f"{out}: already holds a fit (use --force / force=True to replace it)")
+            tiles_dir = out / "tiles"
+            _run.prepare(tiles_dir, job.record, force, pid == 0, barrier)
+            if pid == 0:
+                held = _run.lock(tiles_dir)
+                if _run.read_run(tiles_dir) is None:
+                    _run.write_run(tiles_dir, job.record)
+        yield TileRun(btf, job, out, tiles_dir, pid, nproc, client)
+    finally:
+        if held is not None:
+            held.close()
+
+
+class TileRun:
+    """One run over a BTF's tiles: those finished before (``results``, read from the run's folder)
+    and the others, fitted by :meth:`fit`. ``mine``: this process's share of the tiles."""
+
+    def __init__(self, btf: BTF, job: TileJob, out, tiles_dir, pid: int, nproc: int, client):
+        self.btf, self.job, self.out, self.tiles_dir = btf, job, out, tiles_dir
+        self.pid, self.nproc, self.client = pid, nproc, client
+        self.mine = [t for t in range(btf.n_tiles) if t % nproc == pid]
+        self.results: dict[int, dict] = {}
+        if tiles_dir is not None:
+            for t in self.mine:
+                got = _run.load_tile(tiles_dir, t)
+                if got is not None:
+                    self.results[t] = got
+        self.resumed = len(self.results)
+
+    def texels(self, tiles) -> int:
+        """Texels in ``tiles``."""
+        total = 0
+        for t in tiles:
+            r0, r1, c0, c1 = self.btf.tile_box(t)
+            total += (r1 - r0) * (c1 - c0)
+        return total
+
+    def fit(self, bar, max_tiles: int | None = None) -> ParameterMaps | None:
+        """Fit the tiles left (``bar.advance(texels)`` after each), then assemble the maps (and,
+        with a folder, write the results and remove the tiles). None when stopped by ``max_tiles``."""
+        todo = [t for t in self.mine if t not in self.results]
+        if max_tiles is not None and max_tiles < len(todo):
+            todo = todo[:max_tiles]
+            stopped = True
+        else:
+            stopped = False
+        t0 = time.perf_counter()
+        workers: set[str] = set()
+        for t, arrays, where in self._fitted(todo):
+            self.results[t] = arrays
+            workers.add(where)
+            bar.advance(self.texels([t]))
+        if stopped:
+            return None
+        seconds = time.perf_counter() - t0
+        return self._finish(seconds, self.texels(todo), workers)
+
+    def _fitted(self, todo):
+        """(tile, arrays, who fitted it) for every tile of ``todo``, as they are finished."""
+        job = self.job
+        if self.client is not None:
+            from .cluster import fit_tiles
+
+            yield from fit_tiles(self.client, self.btf, job, todo, self.tiles_dir)
+            return
+        for t in todo:
+            arrays = _tile.fit_tile(self.btf, t, job.model, job.options, job.neighbours)
+            if self.tiles_dir is not None:
+                _run.save_tile(self.tiles_dir, t, arrays)
+            yield t, arrays, "this process"
+
+    def _finish(self, seconds: float, n_fitted: int, workers: set[str]) -> ParameterMaps:
+        import jax
+
+        btf, mdl, options = self.btf, self.job.model, self.job.options
+        maps = _assemble(btf, mdl, self.results)
+        if self.nproc > 1:
+            maps = _gather(maps, btf, self.mine)
+        info = {"btf": btf.name, "source": btf.source, "btf_options": btf.meta.get("options", {}),
+                "processes": self.nproc, "devices": [str(d) for d in jax.devices()] if self.client is None else None,
+                "texels_fitted_now": int(n_fitted) if self.nproc == 1 else None,
+                "seconds": seconds, "texels_per_second": (n_fitted / seconds) if n_fitted and seconds > 0 else None,
+                "resumed_tiles": self.resumed, "neighbours": self.job.neighbours}
+        if self.client is not None:
+            info["dask"] = {"scheduler": self.client.scheduler.address, "workers": len(workers)}
+        pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],
+                           steps=maps["steps"], loss_name=options.loss, solver=options.solver, info=info)
+        if self.out is not None and self.pid == 0:
+            pm.save(self.out, force=True)
+            shutil.rmtree(self.tiles_dir, ignore_errors=True)
+        _barrier(self.nproc, "brdffit-fit-btf-done")
+        return pm
 
 
 def _assemble(btf: BTF, mdl, results: dict[int, dict]) -> dict:

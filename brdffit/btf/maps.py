@@ -8,7 +8,8 @@ and ``steps`` (solver iterations), channel ``Y``. Every part's header holds ``br
 (``brdffit validate-btf``). Previews: ``preview_<name>.png`` per map (colour parameters as an
 RGB image scaled by their 99th percentile and sRGB-encoded, the others through viridis between
 their 1st and 99th percentiles) and ``maps.png`` (all maps with colour bars). ``summary.json``:
-model, loss, solver, texels, converged count, per-parameter and loss statistics, timing.
+model, loss, solver, texels, converged count, per-parameter and loss statistics (min, median, mean,
+max), timing.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ class ParameterMaps:
     def summary(self) -> dict:
         def stats(a):
             a = np.asarray(a, np.float64)
-            return {"min": float(a.min()), "mean": float(a.mean()), "max": float(a.max())}
+            return {"min": float(a.min()), "median": float(np.median(a)), "mean": float(a.mean()), "max": float(a.max())}
 
         return {
             "model": self.model, "loss": self.loss_name, "solver": self.solver,
@@ -149,6 +150,16 @@ class ParameterMaps:
         files.append(folder / "summary.json")
         files.append(self.save_exr(folder / "params.exr", force=force))
         return files
+
+    def export(self, path, *, bsdf_id: str | None = None, force: bool = False, source=None) -> list[Path]:
+        """The maps of a native model as the renderer's own material with every map a texture
+        (SPEC 7, 13), the extension picking the format: ``.xml`` Mitsuba 3 (textures in
+        ``<stem>_textures/`` beside it), ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender. Returns the
+        paths written; see :mod:`brdffit.materials.textured`."""
+        from ..materials.textured import export_maps
+
+        return export_maps(self, path, bsdf_id=bsdf_id, force=force,
+                           source=source if source is not None else self.info.get("file"))
 
     # display ------------------------------------------------------------------------------------
     def _repr_png_(self) -> bytes:

@@ -286,10 +286,8 @@ def load_btf(
                    "srgb": bool(srgb), "tile": tile}
         signature = _signature(path, options)
         keys = [(i, j) for i in range(UBO_SIZE) for j in range(UBO_SIZE)]
-        first = _decode(src, keys[0], srgb, region, step)
+        first = _first_image(src, srgb, region, step)
         h, w, c = first.shape
-        if h == 0 or w == 0:
-            raise InputError(src.label(keys[0]), f"region {region} with step {step} selects no texels of this image")
         if cache_dir is None:
             folder = Path(tempfile.mkdtemp(prefix="brdffit-btf-"))
             owner = _TempOwner(folder)
@@ -345,6 +343,25 @@ def load_btf(
         src.close()
     return BTF(name=name or path.stem, source=str(path), height=h, width=w, channels=c, tile=tile, cache=cache,
                meta=meta, _owner=owner)
+
+
+def btf_shape(source, *, region=None, step: int = 1, srgb: bool = True) -> tuple[int, int, int]:
+    """(height, width, channels) of the BTF that ``load_btf(source, region=..., step=...)`` reads,
+    from one image; the source's image set is checked as ``load_btf`` checks it (an InputError
+    names the file)."""
+    src = _open(Path(source))
+    try:
+        return _first_image(src, srgb, None if region is None else tuple(int(x) for x in region), int(step)).shape
+    finally:
+        src.close()
+
+
+def _first_image(src, srgb, region, step) -> np.ndarray:
+    key = (0, 0)
+    img = _decode(src, key, srgb, region, step)
+    if img.shape[0] == 0 or img.shape[1] == 0:
+        raise InputError(src.label(key), f"region {region} with step {step} selects no texels of this image")
+    return img
 
 
 class _TempOwner:

@@ -12,10 +12,10 @@ Each sub-command lives in its own module of this package and registers itself on
 from __future__ import annotations
 
 import contextlib
-import os
 import signal
 import sys
 import threading
+import time
 import warnings
 
 import click
@@ -52,52 +52,17 @@ class Interrupted(BaseException):
     removed, locks released)."""
 
 
-#: Set by :func:`entry` (the ``brdffit`` executable): Ctrl-C ends the process from a watcher thread
-#: (:func:`_end_on_interrupt`) instead of raising into the running code.
-_ENDS_PROCESS = False
-
-
-def _end_on_interrupt() -> None:
-    """Make Ctrl-C end the ``brdffit`` process at once, whatever it is doing, leaving nothing written.
-
-    An exception raised by a signal handler lands wherever the interpreter is: inside a compiler's
-    callback or an extension module's initialisation it aborted the process (-6), crashed it (-11)
-    or hung it, and after a commit it reported 130 with the result written (issue 28, measured by
-    benchmarks/bench_interrupt.py). So the handler raises nothing: the C-level signal handler writes
-    the signal's number to a pipe (``signal.set_wakeup_fd``), a daemon thread waiting on it wakes
-    within milliseconds even while the main thread runs native code, removes what this command
-    wrote (temporaries, locks, committed results: ``_files.remove_this_runs_outputs``, which waits
-    for a commit in progress), says so in one line and ends the process with 130 (``os._exit``:
-    no teardown of native libraries in the middle of their work)."""
-    global _ENDS_PROCESS
-    from .._files import STOP_REQUESTED, remove_this_runs_outputs
-
-    read_end, write_end = os.pipe()
-    os.set_blocking(write_end, False)
-
-    def watch() -> None:
-        while signal.SIGINT not in os.read(read_end, 64):
-            pass
-        STOP_REQUESTED.set()
-        remove_this_runs_outputs()
-        os.write(2, b"brdffit: interrupted\n")
-        os._exit(EXIT_INTERRUPTED)
-
-    threading.Thread(target=watch, name="brdffit-interrupt", daemon=True).start()
-    signal.signal(signal.SIGINT, lambda signum, frame: None)  # the watcher acts; a C handler is needed
-    signal.set_wakeup_fd(write_end, warn_on_full_buffer=False)
-    _ENDS_PROCESS = True
-
-
 @contextlib.contextmanager
 def _interrupts_raise():
     """Ctrl-C raises :class:`Interrupted` and sets ``STOP_REQUESTED``, which stops any result from
     being committed even where the exception is swallowed (a signal landing in a garbage-collection
     callback or a ``__del__``); ``main`` then reports the run as interrupted."""
-    if threading.current_thread() is not threading.main_thread() or _ENDS_PROCESS:
-        yield
-        return
     from .._files import STOP_REQUESTED
+    from .._interrupt import ends_process_on_interrupt
+
+    if threading.current_thread() is not threading.main_thread() or ends_process_on_interrupt():
+        yield  # the executable: its Ctrl-C ends the process from a watcher thread (_files)
+        return
 
     def on_sigint(signum, frame):
         STOP_REQUESTED.set()
@@ -128,6 +93,26 @@ def _interrupts_raise():
         signal.signal(signal.SIGINT, previous)
         sys.unraisablehook = previous_hook
         STOP_REQUESTED.clear()
+
+
+#: How long a command that failed after Ctrl-C waits for the executable's watcher thread, which is
+#: ending the process (it stops helper processes and removes outputs first: well under this).
+_WATCHER_GRACE_S = 60.0
+
+
+def _stop_if_interrupted() -> None:
+    """A command failed after Ctrl-C: the failure is the interrupt's doing (the executable's watcher
+    thread stops the Blender worker, so the command sees it end). Say nothing of it: in the
+    executable, wait for the watcher to end the process with its one line; else raise
+    :class:`Interrupted`."""
+    from .._files import STOP_REQUESTED
+    from .._interrupt import ends_process_on_interrupt
+
+    if not STOP_REQUESTED.is_set():
+        return
+    if ends_process_on_interrupt():
+        time.sleep(_WATCHER_GRACE_S)
+    raise Interrupted()
 
 
 def check_model(name: str, channels: int = 3):
@@ -173,7 +158,12 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings(record=True) as caught, _interrupts_raise():
             warnings.simplefilter("always")
             _load_commands()  # inside: a Ctrl-C during the imports is an interrupt like any other
-            result = cli.main(args=(["--debug"] if debug else []) + argv, prog_name="brdffit", standalone_mode=False)
+            try:
+                result = cli.main(args=(["--debug"] if debug else []) + argv, prog_name="brdffit",
+                                  standalone_mode=False)
+            except Exception:
+                _stop_if_interrupted()
+                raise
     except (Interrupted, KeyboardInterrupt, click.exceptions.Abort):
         click.echo("brdffit: interrupted", err=True)
         return EXIT_INTERRUPTED
@@ -212,14 +202,16 @@ def entry() -> None:
     teardown does not walk all of them again. Measured on a second-process ``brdffit fit``: the
     default settings cost ~0.8 s CPU of ~3.3 s, most of it in that teardown (atexit handlers
     and module teardown still run; the exit is not skipped). Ctrl-C ends the process from a watcher
-    thread (:func:`_end_on_interrupt`).
+    thread (``brdffit._interrupt``; the package's first line installs it already).
     (It used to skip the teardown with ``os._exit`` to save ~0.4 s; that also hid the abort at exit
     of issue 13 -- a daemon compile thread -- which is fixed in the library now, and skipped
     atexit handlers such as coverage's.)
     """
     import gc
 
-    _end_on_interrupt()
+    from .._interrupt import end_process_on_interrupt
+
+    end_process_on_interrupt()  # done already unless run as `python -m brdffit`
     gc.set_threshold(*GC_THRESHOLDS)
     try:
         status = main()

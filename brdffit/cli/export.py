@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import click
@@ -11,7 +10,7 @@ from . import cli
 
 
 @cli.command("export")
-@click.argument("fit_json", metavar="FIT.json", type=click.Path(path_type=str))
+@click.argument("fit_json", metavar="FIT.json|PARAMS.exr", type=click.Path(path_type=str))
 @click.option("-o", "--out", "out", type=click.Path(path_type=str), default=None,
               help="Material file to write; its extension picks the format: .xml (Mitsuba 3), .glb or .gltf "
                    "(glTF 2.0), .blend (Blender; needs .venv-blender), .mtlx (MaterialX 1.39) "
@@ -27,39 +26,43 @@ def export_cmd(fit_json: str, out: str | None, to: str | None, bsdf_id: str | No
     own plugin (plain Mitsuba loads it); any other fit in .xml is <bsdf type="brdffit"> (load the scene
     after `import brdffit; brdffit.register_mitsuba()`). A glTF file holds a gltf:metallic_roughness
     material on a UV sphere. Include an XML fragment in a scene with <include filename="FILE"/> and
-    refer to it with <ref id="ID"/>."""
-    from .._files import atomic_file, check_target
-    from ..errors import InputError, UsageError
+    refer to it with <ref id="ID"/>. A PARAMS.exr of fit-btf (maps of a native model) becomes the same
+    material with every map a texture, written beside FILE (Mitsuba) or inside it (glTF, Blender)."""
+    if Path(fit_json).suffix.lower() == ".exr":
+        from .export_maps import export_maps_cmd
+
+        return export_maps_cmd(fit_json, out, to, bsdf_id, force)
+    import contextlib
+
+    from .._files import reserve
+    from ..errors import InputError
     from ..fitting.result import FitResult
-    from ..materials import check_format, conversion_line, convert, material_bytes
+    from ..materials import (check_format, check_id, conversion_line, convert, describe, export, material_bytes,
+                             safe_id)
 
     path = Path(fit_json)
     if not path.is_file():
         raise InputError(fit_json, "no such file")
     fit = FitResult.from_json(path)
     ext = check_format(fit, out if out is not None else "stdout.xml", to, source=fit_json)
-    if out is not None:
-        check_target(out, force, folder=False)  # before any work: nothing is written on bad usage
     if bsdf_id is None:
         parent = path.resolve().parent.name
-        bsdf_id = re.sub(r"[^A-Za-z0-9_]", "_", parent if path.stem == "fit" and parent else path.stem) or "brdffit"
-    elif not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", bsdf_id):
-        raise UsageError(f"--id {bsdf_id!r}: use letters, digits and '_' (Mitsuba ids cannot hold '.')")
-    if not fit.converged:
-        click.echo(f"brdffit: {fit_json}: the fit did not converge (exported anyway, marked in the file)", err=True)
-    if to is not None:
-        fit = convert(fit, to)
-        click.echo(f"brdffit: {conversion_line(fit) or f'{fit.model.name}: nothing to convert'}", err=True)
+        bsdf_id = safe_id(parent if path.stem == "fit" and parent else path.stem)
+    check_id(bsdf_id)
+    with contextlib.ExitStack() as stack:
+        if out is not None:  # taken before any work: a place another run writes, or that cannot be written, is refused now
+            stack.enter_context(reserve(out, force, folder=False))
         if not fit.converged:
-            click.echo(f"brdffit: the conversion to {fit.model.name} did not converge ({fit.status}); exported anyway",
-                       err=True)
-    data = material_bytes(fit, ext, bsdf_id)
-    if out is None:
-        click.echo(data.decode(), nl=False)
-        return 0
-    with atomic_file(out, force=force) as tmp:
-        tmp.write_bytes(data)
-    what = "Mitsuba's own plugin" if ext == ".xml" and fit.model.target == "mitsuba" else (
-        '<bsdf type="brdffit">' if ext == ".xml" else "a UV sphere with the material")
-    click.echo(f"wrote {out}: {what}, id {bsdf_id!r} ({fit.model.name})", err=True)
+            click.echo(f"brdffit: {fit_json}: the fit did not converge (exported anyway, marked in the file)", err=True)
+        if to is not None:
+            fit = convert(fit, to)
+            click.echo(f"brdffit: {conversion_line(fit) or f'{fit.model.name}: nothing to convert'}", err=True)
+            if not fit.converged:
+                click.echo(f"brdffit: the conversion to {fit.model.name} did not converge ({fit.status}); "
+                           "exported anyway", err=True)
+        if out is None:
+            click.echo(material_bytes(fit, ext, bsdf_id).decode(), nl=False)
+            return 0
+        export(fit, out, bsdf_id=bsdf_id, force=force)
+    click.echo(f"wrote {out}: {describe(fit, ext)}, id {bsdf_id!r} ({fit.model.name})", err=True)
     return 0

@@ -36,7 +36,7 @@ def _pairs(text: str | None):
 def validate_btf_command(folder, params, pairs, out, force, cache_dir) -> int:
     """Render the maps in PARAMS.exr on a textured square for (light, view) pairs of the BTF in
     FOLDER and compare with its photographs: EXRs, panels, metrics.json."""
-    from .._files import check_target
+    from .._files import reserve
     from ..btf import load_btf
     from ..btf.maps import ParameterMaps
     from ..btf.validate import DEFAULT_PAIRS_DEG, pair_indices, validate_btf
@@ -44,12 +44,12 @@ def validate_btf_command(folder, params, pairs, out, force, cache_dir) -> int:
     chosen = _pairs(pairs) or DEFAULT_PAIRS_DEG
     pair_indices(chosen)  # bad pairs: usage error before any work
     out = out or Path(params).resolve().parent / "validate-btf"
-    check_target(out, force)
-    maps = ParameterMaps.load(params)
-    o = maps.info.get("btf_options", {})
-    btf = load_btf(folder, region=o.get("region"), step=o.get("step", 1), includes_cos=o.get("includes_cos", False),
-                   scale=o.get("scale", 1.0), srgb=o.get("srgb", True), cache_dir=cache_dir, progress=True)
-    v = validate_btf(btf, maps, chosen, out=out, force=force)
+    with reserve(out, force, folder=True):  # before any work: another run writing it is refused now
+        maps = ParameterMaps.load(params)
+        o = maps.info.get("btf_options", {})
+        btf = load_btf(folder, region=o.get("region"), step=o.get("step", 1), includes_cos=o.get("includes_cos", False),
+                       scale=o.get("scale", 1.0), srgb=o.get("srgb", True), cache_dir=cache_dir, progress=True)
+        v = validate_btf(btf, maps, chosen, out=out, force=force)
     ov = v.metrics["overall"]
     click.echo(f"{out}: {len(v.files)} files; rmse {ov['rmse']:.4g}, relative rmse {ov['rel_rmse']:.3g}, "
                f"psnr {ov['psnr']:.2f} dB (worst pair {ov['psnr_min']:.2f}), flip {ov['flip']:.4f}")

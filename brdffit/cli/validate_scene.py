@@ -25,7 +25,7 @@ def validate_scene_cmd(scene: str, material: str, fit_json: str, reference: str,
     reference.exr, fit.exr, panel.png (reference | fit | FLIP) and metrics.json."""
     from rich.console import Console
 
-    from .._files import check_target
+    from .._files import reserve
     from ..errors import InputError
     from ..render.validate import as_fit, as_source
     from ..scene import validate_scene
@@ -35,13 +35,14 @@ def validate_scene_cmd(scene: str, material: str, fit_json: str, reference: str,
         if not Path(path).exists():
             raise InputError(path, what)
     out_path = Path(out) if out is not None else Path(fit_json).resolve().parent / "validate-scene"
-    check_target(out_path, force)  # before any work: nothing is written on bad usage
-    # read every input before rendering: bad input is one line, nothing else
-    fit, ref = as_fit(fit_json), as_source(reference)
-    load_scene(scene, material)
-    console = Console(stderr=True)
-    with console.status(f"rendering {scene} with {material!r} as the reference and as the fit"):
-        v = validate_scene(scene, material, fit, ref, spp=spp, out=out_path, force=force)
+    # taken before any work: nothing is written on bad usage, and another run writing it is refused now
+    with reserve(out_path, force, folder=True):
+        # read every input before rendering: bad input is one line, nothing else
+        fit, ref = as_fit(fit_json), as_source(reference)
+        load_scene(scene, material)
+        console = Console(stderr=True)
+        with console.status(f"rendering {scene} with {material!r} as the reference and as the fit"):
+            v = validate_scene(scene, material, fit, ref, spp=spp, out=out_path, force=force)
     o = v.metrics["image"]
     click.echo(f"{out_path}: {len(v.files)} files; rmse {o['rmse']:.4g}, relative rmse {o['rel_rmse']:.3g}, "
                f"psnr {o['psnr']:.2f} dB, flip {o['flip']:.4f}")

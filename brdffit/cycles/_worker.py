@@ -251,6 +251,72 @@ def op_blend(args, out):
     return {"blend": "material.blend"}
 
 
+def op_blend_maps(args, out):
+    """A .blend file of parameter maps: a square in the z = 0 plane facing +z (the maps' aspect, the
+    longer side 2 units; texture coordinates with image row 0 at the top, Blender's v running up) with
+    the Principled BSDF of ``material``, its inputs in ``textures`` fed by image textures (``Closest``,
+    packed into the file; a scalar map through its red channel: a colour-to-float link would take the
+    luminance), an orthographic camera above it at one pixel per texel, a sun; Cycles as engine."""
+    reset()
+    width, height = int(args["width"]), int(args["height"])
+    sc = cycles_scene(width, height, 64)
+    sc.cycles.max_bounces = 12
+    bpy.data.worlds["black"].node_tree.nodes["Background"].inputs["Strength"].default_value = 0.2
+    name = str(args.get("name") or "brdffit")
+    mat = principled_material(args["material"], name)
+    mat["brdffit"] = json.dumps(args.get("extras") or {}, sort_keys=True)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    for socket, tex in args["textures"].items():
+        if socket not in SOCKETS:
+            raise Refused(f"unknown Principled BSDF input {socket!r}; known: {', '.join(SOCKETS)}")
+        image = bpy.data.images.load(tex["path"], check_existing=False)
+        image.name = tex["name"]
+        image.colorspace_settings.name = "Non-Color" if tex["data"] else "Linear Rec.709"
+        image.pack()
+        node = tree.nodes.new("ShaderNodeTexImage")
+        node.image, node.interpolation, node.label = image, "Closest", tex["name"]
+        output = node.outputs["Color"]
+        if tex["scalar"]:
+            split = tree.nodes.new("ShaderNodeSeparateColor")
+            tree.links.new(output, split.inputs["Color"])
+            output = split.outputs["Red"]
+        tree.links.new(output, bsdf.inputs[socket])
+    a, b = width / max(width, height), height / max(width, height)
+    corners = [(-a, -b, 0.0), (a, -b, 0.0), (a, b, 0.0), (-a, b, 0.0)]
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(corners, [], [(0, 1, 2, 3)])
+    uv = mesh.uv_layers.new(name="UVMap")
+    for loop in mesh.loops:
+        x, y, _ = corners[loop.vertex_index]
+        uv.data[loop.index].uv = ((x + a) / (2 * a), (y + b) / (2 * b))
+    mesh.materials.append(mat)
+    square = bpy.data.objects.new(name, mesh)
+    sc.collection.objects.link(square)
+    cam = add_camera(sc, 2.0 * max(a, b))
+    cam.location = (0.0, 0.0, 5.0)
+    cam.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)  # looking down -z, +y up
+    point_towards(add_sun(sc, 3.0), (0.4, -0.6, 0.7))
+    path = os.path.join(out, "maps.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, compress=False)
+    return {"blend": "maps.blend"}
+
+
+def op_render_file(args, out):
+    """A .blend file rendered through its own camera at its own resolution, direct light only, a black
+    world, its one sun turned towards ``light`` with ``irradiance``: a pixel is f (n.l) E."""
+    bpy.ops.wm.open_mainfile(filepath=args["path"])
+    sc = bpy.context.scene
+    suns = [o for o in sc.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+    if len(suns) != 1 or sc.camera is None:
+        raise Refused(f"{args['path']}: needs one sun and a camera, has {len(suns)} sun(s)")
+    sc = cycles_scene(sc.render.resolution_x, sc.render.resolution_y, int(args.get("spp", 4)))
+    suns[0].data.energy, suns[0].data.angle = float(args.get("irradiance", 1.0)), 0.0
+    point_towards(suns[0], directions([args["light"]], "light")[0])
+    np.save(os.path.join(out, "image.npy"), render_rgb(sc, os.path.join(out, "render.exr")))
+    return {"image": "image.npy"}
+
+
 def socket_value(socket):
     v = socket.default_value
     return [float(x) for x in v][:3] if hasattr(v, "__len__") else float(v)
@@ -282,6 +348,7 @@ def op_inspect(args, out):
 
 
 OPS = {"gonio": op_gonio, "sphere": op_sphere, "blend": op_blend, "inspect": op_inspect,
+       "blend_maps": op_blend_maps, "render_file": op_render_file,
        "ping": lambda args, out: {"blender": bpy.app.version_string}}
 
 

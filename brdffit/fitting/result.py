@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,8 +25,27 @@ FORMAT = "brdffit.fit/1"
 def _metrics(recorded: dict) -> dict[str, float]:
     """A fit file's metrics, an old name read as today's (``fitfile.METRIC_ALIASES``) unless both
     are present."""
-    out = {k: float(v) for k, v in recorded.items() if METRIC_ALIASES.get(k) not in recorded}
+    out = {k: _float(v) for k, v in recorded.items() if METRIC_ALIASES.get(k) not in recorded}
     return {METRIC_ALIASES.get(k, k): v for k, v in out.items()}
+
+
+def _float(x) -> float:
+    """A number of a fit file; null (what strict JSON writes for NaN and inf) is NaN."""
+    return float("nan") if x is None else float(x)
+
+
+def _at_bound(recorded: dict) -> dict[str, str]:
+    """A fit file's ``at_bound`` (checked by ``fitfile``): text as it is; per-channel flags (a list of
+    booleans) as the text they stand for, a side not being recorded ("on a bound in channel 2")."""
+    out = {}
+    for name, v in recorded.items():
+        if isinstance(v, str):
+            out[name] = v
+        elif any(v):
+            on = [str(i) for i, flag in enumerate(v) if flag]
+            out[name] = "on a bound" if len(on) == len(v) else \
+                f"on a bound in channel{'s' if len(on) > 1 else ''} {', '.join(on)}"
+    return out
 
 
 def _code_of(status: str, converged: bool) -> int:
@@ -51,7 +69,8 @@ class FitResult:
     loss_value: float
     #: The fit's loss (under its name, evaluated afresh at the result), "rmse", "log_rmse",
     #: "rel_rmse", "mean_rel_error", "max_abs_error" (over the used samples, equally weighted).
-    #: Other losses' values: ``brdffit.fitting.problem.evaluate`` (what ``compare`` reports).
+    #: Other losses' values: ``brdffit.fitting.problem.evaluate`` (what ``compare`` reports). A
+    #: converted fit's (``convert``) are against the source fit's BRDF, not against data.
     metrics: dict[str, float]
     steps: int
     converged: bool
@@ -131,6 +150,7 @@ class FitResult:
             for k, v in self.params.items()
         )
         metrics = ", ".join(f"{k} {v:.4g}" for k, v in self.metrics.items() if k in ("rmse", "log_rmse", "rel_rmse"))
+        metrics += self._against()
         colour = "green" if self.converged else "red"
         img = base64.b64encode(self._repr_png_()).decode()
         return (
@@ -159,7 +179,9 @@ class FitResult:
                force: bool = False) -> "FitResult":
         """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
         ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13; :func:`brdffit.materials.export`). With ``to``, the
-        fit is converted first; returns the fit written."""
+        fit is converted first; returns the fit written. ``bsdf_id`` is held to the CLI's ``--id`` rule
+        (letters, digits, '_', not starting with a digit; else UsageError); default: the file's name
+        made so."""
         return provider("fit_export")(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id,
                                       force=force)
 
@@ -192,8 +214,11 @@ class FitResult:
         }
 
     def to_json(self, path: str | os.PathLike | None = None, indent: int = 2) -> str:
-        """JSON text (floats written with full precision: the round trip is exact)."""
-        text = json.dumps(self.to_dict(), indent=indent, allow_nan=True)
+        """Strict JSON text (floats written with full precision: the round trip is exact; a number
+        that is not finite, a diverged fit's loss or metric, is written null and read back as NaN)."""
+        from .._files import json_text
+
+        text = json_text(self.to_dict(), indent=indent)
         if path is not None:
             Path(path).write_text(text + "\n")
         return text
@@ -223,13 +248,13 @@ class FitResult:
             model=model,
             params={k: np.asarray(v, dtype=np.float64) for k, v in checked.items()},
             loss=d.get("loss", ""),
-            loss_value=float(d.get("loss_value", float("nan"))),
+            loss_value=_float(d.get("loss_value")),
             metrics=_metrics(d.get("metrics", {})),
             steps=int(d.get("steps", 0)),
             converged=bool(d.get("converged", False)),
             status=str(d.get("status", "")),
             status_code=None if d.get("status_code") is None else int(d["status_code"]),
-            seconds={k: float(v) for k, v in d.get("seconds", {}).items()},
+            seconds={k: _float(v) for k, v in d.get("seconds", {}).items()},
             solver=str(d.get("solver", "")),
             data_name=str(d.get("data_name", "")),
             n_used=int(d.get("n_used", 0)),
@@ -239,13 +264,19 @@ class FitResult:
             start={k: np.asarray(v, dtype=np.float64) for k, v in d.get("start", {}).items()},
             options=dict(d.get("options", {})),
             # Absent from fit.json files written before they existed: none recorded.
-            at_bound={str(k): str(v) for k, v in (d.get("at_bound") or {}).items()},
+            at_bound=_at_bound(d.get("at_bound") or {}),
             warnings=tuple(str(w) for w in (d.get("warnings") or ())),
         )
+
+    def _against(self) -> str:
+        """" against the SOURCE fit" for a converted fit (its loss and metrics measure the conversion,
+        not the data: ``brdffit.materials.convert``), else ""."""
+        c = self.options.get("converted_from") if isinstance(self.options, dict) else None
+        return f" against the {c.get('model')} fit" if isinstance(c, dict) else ""
 
     def __repr__(self) -> str:
         ps = ", ".join(f"{k}={np.array2string(np.asarray(v), precision=4)}" for k, v in self.params.items())
         return (
-            f"FitResult({self.model.name} on {self.data_name!r}: {ps}; {self.loss}={self.loss_value:.4g}, "
-            f"{self.status}, {self.steps} steps, {self.solver})"
+            f"FitResult({self.model.name} on {self.data_name!r}: {ps}; {self.loss}={self.loss_value:.4g}"
+            f"{self._against()}, {self.status}, {self.steps} steps, {self.solver})"
         )

@@ -311,6 +311,19 @@ def _lobe_label(lobe: Lobe) -> str:
     return f"lobe {prefix}" if prefix else f"the {lobe.kind} lobe"
 
 
+def _bound_sentence(space: ParameterSpace, name: str, sides: str) -> str:
+    """The warning of one ``at_bound`` entry ("lower", "upper in channel 0", "lower in channel 2;
+    upper in channel 0", see :meth:`ParameterSpace.at_bound`), a clause per side:
+    "kd ended on its lower bound 0 in channel 2 (the formula's limit) and on its upper bound 1 in
+    channel 0 (set by bounds=)."."""
+    clauses = []
+    for part in sides.split("; "):
+        side, _, channels = part.partition(" in ")
+        where = f" in {channels}" if channels else ""
+        clauses.append(f"its {side} bound {space.describe_bound(name, side):g}{where} ({space.bound_origin(name, side)})")
+    return f"{name} ended on " + " and on ".join(clauses) + "."
+
+
 def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: Mapping[str, object],
                  spacing: float | None) -> list[str]:
     """One sentence per problem of a fitted vector ``v``:
@@ -323,11 +336,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
     * a free parameter with no standard error that is not on a bound: the data do not determine
       it (a near-null direction of J'J, see ``brdffit.fitting.driver.standard_errors``).
     """
-    out = []
-    for name, side in at_bound.items():
-        which = side.split(" ")[0]
-        value = space.describe_bound(name, which)
-        out.append(f"{name} ended on its {side} bound {value:g} ({space.bound_origin(name, which)}).")
+    out = [_bound_sentence(space, name, sides) for name, sides in at_bound.items()]
     if spacing is not None:
         for lobe, hw in lobe_halfwidths(space.model, v):
             if 2.0 * hw < spacing:

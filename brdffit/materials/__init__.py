@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import UsageError
+from ._names import check_id, safe_id
+
+#: Metrics relative to the reference (SPEC 5): not a number against a reference that is 0 everywhere.
+RELATIVE_METRICS = ("rel_rmse", "mean_rel_error")
 
 #: File extension -> what it holds.
 FORMATS = {".xml": "Mitsuba 3 scene XML", ".glb": "glTF 2.0 binary", ".gltf": "glTF 2.0",
@@ -58,25 +61,44 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     if loss is None:
         loss = fit.loss if fit.loss in LOSSES else "log"
     converted = run_fit(table, target, loss=loss, **fit_options)
+    metrics = dict(converted.metrics)
+    if not np.sum(values**2) > 1e-300:  # the fitting's floor of a relative metric's denominator
+        # a source fit that is zero everywhere: an error relative to it is not a number (it was 1e150)
+        metrics.update({k: float("nan") for k in RELATIVE_METRICS if k in metrics})
     error = {
         "model": fit.model.name,
         "data_name": fit.data_name,
         "grid": "ubo81",
         "loss": loss,
-        "rel_rmse": float(converted.metrics.get("rel_rmse", float("nan"))),
-        "log_rmse": float(converted.metrics.get("log_rmse", float("nan"))),
+        "rel_rmse": float(metrics.get("rel_rmse", float("nan"))),
+        "log_rmse": float(metrics.get("log_rmse", float("nan"))),
+        "source_fit_metrics": dict(fit.metrics),  # how well the source fit met its data
     }
-    return dataclasses.replace(converted, data_name=fit.data_name or source,
+    return dataclasses.replace(converted, metrics=metrics, data_name=fit.data_name or source,
                                options={**converted.options, "converted_from": error})
+
+
+def converted_from(fit) -> dict | None:
+    """What a converted fit records of its conversion (``options["converted_from"]``), else None."""
+    c = fit.options.get("converted_from") if isinstance(fit.options, dict) else None
+    return c if isinstance(c, dict) and c else None
+
+
+def _value(x) -> str:
+    x = float("nan") if x is None else float(x)
+    return f"{x:.4g}" if np.isfinite(x) else "undefined"
 
 
 def conversion_line(fit) -> str | None:
     """One line naming the conversion error of a converted fit, None for a fit that was not converted."""
-    c = fit.options.get("converted_from") if isinstance(fit.options, dict) else None
-    if not c:
+    c = converted_from(fit)
+    if c is None:
         return None
-    return (f"converted {c.get('model')} -> {fit.model.name}: rel_rmse {c.get('rel_rmse', float('nan')):.4g}, "
-            f"log_rmse {c.get('log_rmse', float('nan')):.4g} against the {c.get('model')} fit on the UBO-81 grid")
+    line = (f"converted {c.get('model')} -> {fit.model.name}: rel_rmse {_value(c.get('rel_rmse'))}, "
+            f"log_rmse {_value(c.get('log_rmse'))} against the {c.get('model')} fit on the UBO-81 grid")
+    if _value(c.get("rel_rmse")) == "undefined":
+        line += f" (rel_rmse is relative to the {c.get('model')} fit, which is 0 everywhere)"
+    return line
 
 
 def _about(fit) -> str:
@@ -118,60 +140,86 @@ def native_of(fit, source=None) -> dict:
         raise InputError(source, f"cannot export: {exc}") from None
 
 
+def _extras(fit) -> dict:
+    """What a material file records of the fit (glTF ``extras``, a Blender custom property, a MaterialX
+    attribute), as strict JSON: a converted fit's metrics are its error against the source fit, and
+    are named so (``metrics_against_source_fit``; the source fit's own, against its data, are in
+    ``converted_from.source_fit_metrics``)."""
+    from .._files import strict_json
+
+    about = {"model": fit.model.name, "data_name": fit.data_name, "loss": fit.loss, "converged": bool(fit.converged)}
+    conversion = converted_from(fit)
+    if conversion is None:
+        about["metrics"] = dict(fit.metrics)
+    else:
+        about["metrics_against_source_fit"] = dict(fit.metrics)
+        about["converted_from"] = conversion
+    return {"brdffit": strict_json(about)}
+
+
 def material_bytes(fit, ext: str, bsdf_id: str) -> bytes:
-    """The contents of a material file of format ``ext`` for ``fit`` (checked by :func:`check_format`)."""
+    """The contents of a material file of format ``ext`` for ``fit`` (checked by :func:`check_format`),
+    the material called ``bsdf_id`` (:func:`check_id`)."""
+    bsdf_id = check_id(bsdf_id)
     if ext == ".xml":
+        from .mitsuba_xml import native_xml, plugin_dict
+
         if fit.model.target == "mitsuba":
-            from .mitsuba_xml import native_xml
-
             native = native_of(fit)
-            comment = (_about(fit) + f". {fit.model.citation}. Mitsuba 3's own {native['type']}"
-                       " plugin: loads in any Mitsuba 3 (no brdffit needed); include it with"
-                       f' <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>.')
-            return native_xml(native, bsdf_id, comment).encode()
-        from ..render.export import bsdf_xml
-
-        text = bsdf_xml(fit, bsdf_id=bsdf_id)
-        line = conversion_line(fit)
-        if line:
-            text = text.replace("<scene", f"<!-- {line.replace('--', '- -')} -->\n<scene", 1)
-        return text.encode()
-    extras = {"brdffit": {"model": fit.model.name, "data_name": fit.data_name, "loss": fit.loss,
-                          "converged": bool(fit.converged), "metrics": dict(fit.metrics),
-                          **({"converted_from": fit.options["converted_from"]}
-                             if isinstance(fit.options, dict) and "converted_from" in fit.options else {})}}
+            how = (f"Mitsuba 3's own {native['type']} plugin: loads in any Mitsuba 3 (no brdffit needed); include"
+                   f' it with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>.')
+        else:
+            native = plugin_dict(fit)
+            how = ("Load it with `import brdffit; brdffit.register_mitsuba()` (after mi.set_variant), include it"
+                   f' with <include filename="THIS FILE"/> and refer to it with <ref id="{bsdf_id}"/>;'
+                   " render it like any scene.")
+        return native_xml(native, bsdf_id, f"{_about(fit)}. {fit.model.citation}. {how}").encode()
     if ext == ".blend":
         from .blender import blend_bytes
 
-        return blend_bytes(native_of(fit), bsdf_id, extras)
+        return blend_bytes(native_of(fit), bsdf_id, _extras(fit))
     if ext == ".mtlx":
         from .materialx import mtlx_text
 
-        return mtlx_text(fit.model.name, native_of(fit), bsdf_id, extras).encode()
+        return mtlx_text(fit.model.name, native_of(fit), bsdf_id, _extras(fit)).encode()
     from .gltf import gltf_bytes
 
-    return gltf_bytes(native_of(fit), bsdf_id, binary=ext == ".glb", extras=extras)
+    return gltf_bytes(native_of(fit), bsdf_id, binary=ext == ".glb", extras=_extras(fit))
+
+
+def describe(fit, ext: str) -> str:
+    """What a material file of format ``ext`` holds for ``fit``, for the line that says it was written."""
+    if ext == ".xml":
+        return f"Mitsuba's own {fit.model.native(fit.params)['type']} plugin" if fit.model.target == "mitsuba" \
+            else '<bsdf type="brdffit">'
+    if ext == ".mtlx":
+        from .materialx import SHADERS
+
+        return f"a MaterialX 1.39 {SHADERS.get(fit.model.name, 'surface')} material"
+    return f"a UV sphere with the material ({FORMATS[ext]})"
 
 
 def default_id(path: str | os.PathLike) -> str:
-    """A Mitsuba-safe id from a file name (letters, digits, '_')."""
-    return re.sub(r"[^A-Za-z0-9_]", "_", Path(path).stem) or "brdffit"
+    """The material id of an export to ``path`` when none is given: its file name made safe."""
+    return safe_id(Path(path).stem)
 
 
 def export(fit, path: str | os.PathLike, *, to: str | None = None, bsdf_id: str | None = None,
            force: bool = False, **convert_options):
     """Write ``fit`` (converted to ``to`` first when given) as the material file ``path``, the
-    extension choosing the format (see the module docstring); atomically, replacing an existing file
-    only with ``force``. Returns the fit written (the converted one with ``to``)."""
-    from .._files import atomic_file, check_target
+    extension choosing the format (see the module docstring), the material called ``bsdf_id``
+    (checked as the CLI's ``--id``; default: :func:`default_id`); atomically, replacing an existing
+    file only with ``force``. The output is taken (checked, locked against other runs) before the
+    conversion: of several runs writing it at once one proceeds, the others raise UsageError.
+    Returns the fit written (the converted one with ``to``)."""
+    from .._files import atomic_file, reserve
 
     ext = check_format(fit, path, to)
-    check_target(path, force, folder=False)  # before the work: nothing is written on bad usage
-    if to is not None:
-        fit = convert(fit, to, **convert_options)
-    if bsdf_id is None:
-        bsdf_id = default_id(path)
-    data = material_bytes(fit, ext, bsdf_id)
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_bytes(data)
+    bsdf_id = default_id(path) if bsdf_id is None else check_id(bsdf_id)
+    with reserve(path, force, folder=False):  # before the work: nothing is written on bad usage
+        if to is not None:
+            fit = convert(fit, to, **convert_options)
+        data = material_bytes(fit, ext, bsdf_id)
+        with atomic_file(path, force=force) as tmp:
+            tmp.write_bytes(data)
     return fit

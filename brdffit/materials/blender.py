@@ -9,8 +9,7 @@ its metrics, the conversion error of a converted fit). Needs the Blender environ
 
 from __future__ import annotations
 
-import json
-
+from .._files import strict_json
 from ..errors import UsageError
 
 
@@ -27,5 +26,4 @@ def blend_bytes(native: dict, name: str, extras: dict) -> bytes:
     """The contents of a .blend file with a sphere and the material ``name`` set from ``native``."""
     from .. import cycles
 
-    json.dumps(extras)  # what cannot be stored fails here, before Blender runs
-    return cycles.blend_file(check_native(native), str(name), extras)
+    return cycles.blend_file(check_native(native), str(name), strict_json(extras))

@@ -17,6 +17,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .._files import plain_text, strict_json
+
 #: Rings and segments of the sphere: about 4k triangles, smooth in any viewer, 200 kB as .glb.
 RINGS, SEGMENTS = 48, 96
 
@@ -60,6 +62,7 @@ def sphere_asset(material: Mapping, name: str, extras: Mapping | None = None):
     ``model.native`` returns it), its binary buffer set as the asset's blob."""
     import pygltflib as g
 
+    name = plain_text(name)
     mesh = uv_sphere()
     blob, views, accessors = b"", [], []
     component = {np.float32: g.FLOAT, np.uint32: g.UNSIGNED_INT}
@@ -88,7 +91,7 @@ def sphere_asset(material: Mapping, name: str, extras: Mapping | None = None):
             roughnessFactor=float(pbr.get("roughnessFactor", 1.0)),
         ),
         doubleSided=bool(material.get("doubleSided", False)),
-        extras=dict(extras or {}),
+        extras=strict_json(dict(extras or {})),  # strict JSON: a NaN metric is null, never a bare NaN
     )
     asset = g.GLTF2(
         asset=g.Asset(version="2.0", generator="brdffit"),

@@ -10,24 +10,17 @@
   equality: how a MaterialX renderer evaluates OpenPBR is its own.
 
 The shader feeds a ``surfacematerial`` named after the material; the fit and its conversion error
-(``extras``) are the material's ``brdffit`` attribute (JSON text) and its ``doc`` string. The
+(``extras``) are the material's ``brdffit`` attribute (strict JSON text) and its ``doc`` string. The
 document validates against MaterialX's standard libraries (tests/test_materials_mtlx.py).
 """
 
 from __future__ import annotations
 
-import json
-import re
-
+from .._files import json_text
 from ..errors import UsageError
+from ._names import safe_id
 
 SHADERS = {"gltf:metallic_roughness": "gltf_pbr", "blender:principled": "open_pbr_surface"}
-
-
-def _name(name: str) -> str:
-    """A valid MaterialX element name (letters, digits, '_'; not starting with a digit)."""
-    out = re.sub(r"[^A-Za-z0-9_]", "_", str(name)) or "brdffit"
-    return out if not out[0].isdigit() else "m_" + out
 
 
 def _inputs(model_name: str, native: dict) -> dict:
@@ -55,13 +48,16 @@ def mtlx_text(model_name: str, native: dict, name: str, extras: dict) -> str:
         raise UsageError(f"a MaterialX file holds a {' or '.join(SHADERS)} material, and this fit is {model_name}: "
                          "convert it with --to gltf:metallic_roughness or --to blender:principled")
     doc = mx.createDocument()
-    material_name = _name(name)
+    material_name = safe_id(name)
     shader = doc.addNode(SHADERS[model_name], material_name + "_shader", "surfaceshader")
     for key, (kind, value) in _inputs(model_name, native).items():
         port = shader.addInput(key, kind)
         port.setValue(mx.Color3(*value) if kind == "color3" else value, kind)
     material = doc.addMaterialNode(material_name, shader)
-    material.setAttribute("brdffit", json.dumps(extras, sort_keys=True))
+    # MaterialX's writer leaves '<' unescaped in an attribute (not well-formed XML): JSON's own
+    # escapes keep the markup characters out of the text (they occur only inside JSON strings)
+    text = json_text(extras, sort_keys=True)
+    material.setAttribute("brdffit", text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026"))
     about = extras.get("brdffit", extras) if isinstance(extras, dict) else {}
     material.setDocString(f"brdffit fit of {about.get('model', model_name)} as {SHADERS[model_name]}")
     return mx.writeToXmlString(doc)

@@ -1,9 +1,11 @@
-"""A native model's dictionary (``model.native(params)``) as a Mitsuba 3 scene-XML fragment.
+"""A fit as a Mitsuba 3 scene-XML fragment: a plugin dictionary written as XML.
 
 Mitsuba's XML and ``mi.load_dict`` describe the same objects: a plugin ``type`` and named
 properties. This writes the dictionary that ``mitsuba:*`` models return (the renderer's own
 ``roughconductor``, ``roughplastic`` or ``principled`` plugin, every setting written out) so that a
-plain Mitsuba, in a process that never imports brdffit, loads it::
+plain Mitsuba, in a process that never imports brdffit, loads it, and for any other fit the
+``brdffit`` plugin's properties (:func:`plugin_dict`, the layout ``brdffit.render.export``
+documents and its plugin reads)::
 
     <scene version="3.0.0">
         <bsdf type="roughplastic" id="paint">
@@ -20,9 +22,14 @@ from __future__ import annotations
 import html
 from collections.abc import Mapping
 
+import numpy as np
+
+from .._files import plain_text
+from ._names import xml_comment
+
 
 def _attr(value: str) -> str:
-    return html.escape(str(value), quote=True)
+    return html.escape(plain_text(value), quote=True)
 
 
 def _number(x) -> str:
@@ -70,9 +77,25 @@ def native_xml(native: Mapping, bsdf_id: str, comment: str = "") -> str:
     for ``<include filename="..."/>`` in a user's scene; ``comment`` goes at the top."""
     lines = ['<?xml version="1.0" encoding="utf-8"?>']
     if comment:
-        # XML comments may not hold "--"
-        lines.append("<!-- " + comment.replace("--", "- -") + " -->")
+        lines.append(xml_comment(comment))
     lines.append('<scene version="3.0.0">')
     lines += _plugin("bsdf", native, "    ", plugin_id=bsdf_id)
     lines += ["</scene>", ""]
     return "\n".join(lines)
+
+
+def plugin_dict(fit) -> dict:
+    """The ``brdffit`` plugin's dictionary of a (non-native) fit, as ``brdffit.mitsuba_bsdf`` makes it
+    but without importing Mitsuba: ``model``, ``channels`` when not 3, and each parameter under its
+    name with '.' written '_' (an ``rgb`` for 3 values, a ``float`` for 1)."""
+    from ..render.export import PLUGIN, _key
+
+    out: dict = {"type": PLUGIN, "model": fit.model.name}
+    if fit.model.channels != 3:
+        out["channels"] = int(fit.model.channels)
+    for name, v in fit.model.check_params(fit.params).items():
+        v = np.asarray(v, np.float64).reshape(-1)
+        if v.size not in (1, 3):  # pragma: no cover - parameters are 1 or 3 values (SPEC 4)
+            raise ValueError(f"{name}: {v.size} values")
+        out[_key(name)] = float(v[0]) if v.size == 1 else {"type": "rgb", "value": [float(x) for x in v]}
+    return out

@@ -114,6 +114,11 @@ def _sym_norm(d: np.ndarray):
     return matplotlib.colors.SymLogNorm(linthresh=typical, linscale=1.0, vmin=-top, vmax=top, base=10)
 
 
+def ring_starts() -> np.ndarray:
+    """Index of the first direction of every theta ring of the UBO-81 ordering, and 81 at the end."""
+    return np.cumsum([0, *(360 // s for s in UBO_PHI_STEP_DEG)])
+
+
 def _ring_ticks(ax, light_axis: bool = True, view_axis: bool = True) -> None:
     """Ticks at the centre of every theta ring of the UBO-81 ordering, lines between rings.
     ``light_axis=False``: no light-ring ticks or label, for a panel right of one that has them
@@ -121,7 +126,7 @@ def _ring_ticks(ax, light_axis: bool = True, view_axis: bool = True) -> None:
     one that has them (the same columns). Tick objects and their labels are most of the time a
     figure of 81x81 panels takes to build and draw."""
     counts = [360 // s for s in UBO_PHI_STEP_DEG]
-    starts = np.cumsum([0, *counts])
+    starts = ring_starts()
     centres = starts[:-1] + (np.asarray(counts) - 1) / 2
     labels = [f"{t}°" for t in UBO_THETA_DEG]
     if view_axis:
