@@ -27,12 +27,15 @@ def lambert_note(model) -> str:
 
 
 def mitsuba_note(model) -> str:
-    """How a fit of ``model`` renders in Mitsuba (SPEC 8, 13)."""
+    """How a fit of ``model`` renders in Mitsuba (SPEC 8, 13), parameter maps included."""
     if model.target == "mitsuba":
+        from ..materials.textured_mitsuba import TEXTURED
+
         plugin = model.name.split(":", 1)[1]
-        return (f"Mitsuba's own {plugin} plugin, every variant (parameter maps: its textures"
-                + (", int_ior a number" if plugin == "roughplastic" else "") + ")")
-    return "the brdffit plugin: this formula translated, every variant, symbolic, differentiable"
+        numbers = [p for p in model.param_names if p not in TEXTURED[plugin]]
+        return (f"Mitsuba's own {plugin} plugin, every variant; parameter maps as its textures"
+                + (f" ({', '.join(numbers)}: one number each)" if numbers else ""))
+    return "the brdffit plugin (this formula translated), every variant, symbolic, differentiable, maps as textures"
 
 
 def describe(model) -> str:

@@ -31,6 +31,7 @@ or, from Python, ``mi.load_dict({..., "bsdf": fit.to_mitsuba()})``.
 from __future__ import annotations
 
 import html
+import re
 
 import numpy as np
 
@@ -112,7 +113,14 @@ def model_bsdf(model, params, props=None):
             if name not in native or tex.scale != 1.0:
                 raise ValueError(f"{model.name}: Mitsuba's {native['type']} plugin takes no texture for {name!r}")
             native[name] = tex.texture
-        return mi.load_dict(native)
+        try:
+            return mi.load_dict(native)
+        except RuntimeError as exc:  # a property the plugin reads as one number (roughplastic's alpha)
+            found = re.search(r'The property "(\w+)" has the wrong type', str(exc))
+            if found is None:
+                raise
+            raise ValueError(f"{model.name}: Mitsuba's {native['type']} plugin takes one number for "
+                             f"{found.group(1)!r}, not a map (hold it fixed in the fit)") from None
     values = {k: textures.get(k, checked[k]) for k in params}
     return symbolic_bsdf(model, values, Mixture.for_model(model, checked), f"brdffit:{model.name}", props=props)
 
@@ -149,7 +157,7 @@ def _is_map(params) -> bool:
 def map_bsdf(model, params):
     """The BSDF of parameter *maps*: each parameter a value, or an (H, W) / (H, W, size) array over the
     surface's uv, as a Mitsuba ``bitmap`` texture (nearest lookup, no filtering; 3-channel maps are
-    upsampled like any colour texture, 1-channel ones read raw). Texel (row i, column j) covers u in
+    upsampled like any colour texture, 1-channel ones read raw; a map of one value is that number). Texel (row i, column j) covers u in
     [j/W, (j+1)/W) and v in [i/H, (i+1)/H): the layout of Mitsuba's own ``bitmap`` texture. The
     formula is the model's translated one (:func:`model_bsdf`); sampling follows the mixture of the
     map's mean parameters (a valid density everywhere; best where texels are alike)."""
@@ -173,6 +181,9 @@ def map_bsdf(model, params):
             continue
         size = model.size(p)
         data = np.broadcast_to(v.reshape(height, width, -1), (height, width, size))
+        if np.all(data.astype(np.float32) == data.astype(np.float32)[:1, :1]):  # one value: a number
+            values[p.name] = data[0, 0]
+            continue
         # Mitsuba upsamples reflectances: a map above 1 is stored divided by its largest value
         scale = max(1.0, float(data.max())) if size == 3 else 1.0
         texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(data / scale, np.float32)),
