@@ -47,18 +47,28 @@ def relative_errors(model, formula=None, seed=0):
     return np.concatenate(out).ravel()
 
 
-#: The 99th percentile each model keeps to: 1e-3 (SPEC 13), but roughplastic's formula reads its two
-#: precomputed terms from tables of Mitsuba's quadratures, smooth between their nodes, where Mitsuba's
-#: internal reflectance is rough at the 1e-4 level in alpha (tests/test_roughplastic_tables.py): measured
-#: 1.8e-3 (the quadratures computed in place: 1.1e-5, but a fit 450x slower and 2.5 GB large).
-TOLERANCE = {"mitsuba:roughplastic": 2.5e-3}
+#: roughplastic's formula reads its two precomputed terms from tables of Mitsuba's quadratures, smooth
+#: between their nodes, where Mitsuba's internal reflectance is rough at the 1e-4 level in alpha
+#: (tests/test_roughplastic_tables.py): measured 1.8e-3 at the 99th percentile, short of the contract's
+#: 1e-3 (the quadratures computed in place: 1.1e-5, but a fit 450x slower and 2.5 GB large). A known
+#: shortfall, kept visible: the contract's test fails for it (strict), and a second test holds it at the
+#: level measured.
+ROUGHPLASTIC_SHORT = pytest.mark.xfail(strict=True, reason="tabulated Mitsuba quadratures: 1.8e-3 at p99, "
+                                                           "contract 1e-3 (see ROUGHPLASTIC_SHORT)")
 
 
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("model", MITSUBA_MODELS)
+@pytest.mark.parametrize("model", [pytest.param(m, marks=ROUGHPLASTIC_SHORT) if m == "mitsuba:roughplastic" else m
+                                   for m in MITSUBA_MODELS])
 def test_mitsuba_models_equal_mitsuba(model):
     err = relative_errors(model)
-    assert np.percentile(err, 99) <= TOLERANCE.get(model, 1e-3), np.percentile(err, [50, 99, 100])
+    assert np.percentile(err, 99) <= 1e-3, np.percentile(err, [50, 99, 100])
+
+
+@pytest.mark.mitsuba
+def test_roughplastic_stays_at_the_level_its_tables_reach():
+    err = relative_errors("mitsuba:roughplastic")
+    assert np.percentile(err, 99) <= 2.5e-3, np.percentile(err, [50, 99, 100])
 
 
 def _schlick(cos, *args):
