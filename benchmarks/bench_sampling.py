@@ -42,14 +42,14 @@ def measure(size: int = 96, spp: int = 16, ref_spp: int = 1024, alpha: float = 0
     """RMSE against the reference for each sampler (mean over ``seeds`` renders) and seconds."""
     import brdffit
     from brdffit._mitsuba import mitsuba
-    from brdffit.render.bsdf import callback_bsdf, model_brdf
     from brdffit.render.sampling import Mixture
+    from brdffit.render.symbolic_bsdf import symbolic_bsdf
 
     mi = mitsuba()
     params = {"kd": 0.0, "ks": 1.0, "alpha": alpha, "f0": 1.0}
     conductor = {"type": "roughconductor", "distribution": "ggx", "alpha": alpha, "material": "none"}
     model = brdffit.models.get("ggx")
-    cosine_only = callback_bsdf(model_brdf(model, params), "ggx (cosine sampling)", Mixture.cosine())
+    cosine_only = symbolic_bsdf(model, model.check_params(params), Mixture.cosine(), "ggx (cosine sampling)")
     reference = np.asarray(mi.render(mi.load_dict(scene(mi, conductor, size)), spp=ref_spp, seed=1000))
     out = {}
     for label, bsdf in (("roughconductor", conductor), ("brdffit mixture", brdffit.mitsuba_bsdf("ggx", params)),

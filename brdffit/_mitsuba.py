@@ -127,21 +127,23 @@ def symbolic_scope() -> bool:
 
 @contextlib.contextmanager
 def evaluated_calls():
-    """Render scenes that hold a brdffit BSDF: Dr.Jit virtual calls and loops run *evaluated*.
+    """Render scenes that hold one of brdffit's *Python-callback* BSDFs: Dr.Jit virtual calls and
+    loops run *evaluated*.
 
-    brdffit's Mitsuba BSDF is a Python object whose ``eval`` hands Mitsuba's arrays to JAX and back,
-    which Dr.Jit allows only when it evaluates calls (the default, symbolic mode records them into
-    one kernel and forbids reading arrays back). This is the one place brdffit changes Dr.Jit
-    flags; every brdffit render runs inside it, and so should a user's own ``mi.render`` of a scene
-    holding a brdffit BSDF::
+    A fit's BSDF (``FitResult.to_mitsuba()``, the ``brdffit`` plugin, parameter maps) needs none of
+    this: its formula runs in Dr.Jit, in Mitsuba's default symbolic mode. What needs it is a BSDF whose
+    ``eval`` hands Mitsuba's arrays to NumPy and back -- a measured UBO-81 table rendered by its
+    interpolator (``brdffit.render.bsdf.CallbackBSDF``), which Dr.Jit allows only when it evaluates
+    calls (the default, symbolic mode records them into one kernel and forbids reading arrays back).
+    brdffit's own renders run inside it, and so may a user's::
 
         with brdffit.evaluated_calls():
             image = mi.render(scene, spp=64)
 
     The flags are restored on exit (also after an error), so other scenes render as before, in
-    symbolic mode. Scenes *without* a brdffit BSDF need nothing: a brdffit BSDF that merely exists
-    while another scene is rendered symbolically is traced by Dr.Jit (every registered BSDF is) and
-    answers with zeros that no ray of that scene can reach. Nesting is allowed.
+    symbolic mode. Scenes *without* such a BSDF need nothing: one that merely exists while another
+    scene is rendered symbolically is traced by Dr.Jit (every registered BSDF is) and answers with
+    zeros that no ray of that scene can reach. Nesting is allowed.
     """
     mi = sys.modules.get("mitsuba")
     if mi is None or (mi.variant() or "").startswith("scalar"):
@@ -153,23 +155,11 @@ def evaluated_calls():
     old = [dr.flag(f) for f in flags]
     for f in flags:
         dr.set_flag(f, False)
-    _EVALUATED[0] += 1
     try:
         yield
     finally:
-        _EVALUATED[0] -= 1
         for f, v in zip(flags, old):
             dr.set_flag(f, v)
-
-
-#: How many :func:`evaluated_calls` blocks are open. Dr.Jit's flags are per thread, and Mitsuba makes
-#: a scene's plugins in worker threads, so a plugin's constructor asks this, not the flags.
-_EVALUATED = [0]
-
-
-def in_evaluated_calls() -> bool:
-    """Whether an :func:`evaluated_calls` block is open (in any thread of this process)."""
-    return _EVALUATED[0] > 0
 
 
 def render(scene, **kwargs):

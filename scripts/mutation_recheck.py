@@ -39,15 +39,16 @@ TESTS_BY_PACKAGE = {
 # Modules whose tests mutmut's configuration leaves out (they run the CLI, render, or start
 # subprocesses) or that have their own files: these are added to the package's.
 TESTS_BY_MODULE = {
-    "brdffit.fitting.batch": ["tests/test_fit_batch_options.py"],
-    "brdffit.fitting.driver": ["tests/test_fit_batch_options.py", "tests/test_fit_status.py", "tests/test_multistart.py"],
+    "brdffit.fitting.lanes": ["tests/test_fit_batch_options.py", "tests/test_fit_claims.py"],
+    "brdffit.fitting.stages": ["tests/test_program_cache.py", "tests/test_solver.py", "tests/test_fit_claims.py"],
+    "brdffit.fitting.driver": ["tests/test_fit_batch_options.py", "tests/test_fit_status.py", "tests/test_multistart.py",
+                               "tests/test_fit_claims.py"],
     "brdffit.fitting.options": ["tests/test_fit_batch_options.py", "tests/test_cli_defaults.py"],
     "brdffit.fitting.cache": ["tests/test_program_cache_keys.py", "tests/test_program_cache.py"],
     "brdffit.fitting.compare": ["tests/test_compare_report.py", "tests/test_surfaces.py"],
     "brdffit.fitting.fitfile": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_reliability.py"],
     "brdffit.fitting.init": ["tests/test_init_axis.py", "tests/test_multistart.py", "tests/test_solver.py"],
     "brdffit.fitting.problem": ["tests/test_fit_result_doc.py", "tests/test_prepare_*.py"],
-    "brdffit.fitting.program": ["tests/test_program_cache.py", "tests/test_solver.py"],
     "brdffit.fitting.result": ["tests/test_fit_result_doc.py", "tests/test_fitfile_bounds.py", "tests/test_surfaces.py"],
     "brdffit.fitting.solve": ["tests/test_solver.py", "tests/test_multistart.py"],
     "brdffit.fitting.solver_lm": ["tests/test_solver.py", "tests/test_multistart.py"],

@@ -3,8 +3,6 @@ for every model at several roughnesses, and sample weights equal to eval / pdf (
 
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 import pytest
 
@@ -61,22 +59,15 @@ def direction(theta, phi):
     return mi.Vector3f(float(np.sin(theta) * np.cos(phi)), float(np.sin(theta) * np.sin(phi)), float(np.cos(theta)))
 
 
-CALLBACK_MODELS = {"blender:principled"}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name, params", list(cases()))
 def test_chi2_sample_matches_pdf(name, params, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the test writes chi2_data.py where it fails
     d = brdffit.mitsuba_bsdf(name, params)
-    # blender:principled's formula reads a table Dr.Jit's translation lacks: its plugin is the JAX
-    # callback, which loads and runs inside evaluated_calls() only
-    context = brdffit.evaluated_calls() if name in CALLBACK_MODELS else contextlib.nullcontext()
-    with context:
-        for view in VIEWS:
-            sample, pdf = chi2.BSDFAdapter("brdffit", d, wi=direction(*view))
-            test = chi2.ChiSquareTest(domain=chi2.SphericalDomain(), sample_func=sample, pdf_func=pdf, **CHI2)
-            assert test.run(0.01, test_count=len(VIEWS)), f"{name} {params} view {view}:\n{test.messages}"
+    for view in VIEWS:
+        sample, pdf = chi2.BSDFAdapter("brdffit", d, wi=direction(*view))
+        test = chi2.ChiSquareTest(domain=chi2.SphericalDomain(), sample_func=sample, pdf_func=pdf, **CHI2)
+        assert test.run(0.01, test_count=len(VIEWS)), f"{name} {params} view {view}:\n{test.messages}"
 
 
 def test_the_test_passes_roughconductor_and_rejects_a_wrong_pdf(tmp_path, monkeypatch):

@@ -148,13 +148,13 @@ def test_an_interrupted_dask_run_resumes_with_dask_or_without(client, lambert_bt
     assert len(second) == 3 and not second & {int(n[5:10]) for n in first}
     # and finished here: the workers' tile files are a local run's
     calls = []
-    real = btf_tile.fit_tile
+    real = btf_tile.fit_tiles
 
-    def counted(b, t, *args):
-        calls.append(t)
-        return real(b, t, *args)
+    def counted(b, tiles, *args, **kwargs):
+        calls.extend(tiles)
+        return real(b, tiles, *args, **kwargs)
 
-    monkeypatch.setattr(btf_tile, "fit_tile", counted)
+    monkeypatch.setattr(btf_tile, "fit_tiles", counted)
     maps = brdffit.fit_btf(lambert_btf, "lambert", progress=False, out=out)
     assert len(calls) == 3 and not set(calls) & (second | {int(n[5:10]) for n in first})
     assert maps.info["resumed_tiles"] == 6

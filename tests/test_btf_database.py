@@ -80,7 +80,7 @@ def test_the_command_fits_every_material_and_writes_the_summary(database, single
         assert float(r["texels_per_second"]) > 0 and r["status"] == "fitted"
     assert json.loads((out / "summary.json").read_text())["materials"][1]["material"] == "felt"
     # run again: every material is finished, nothing is fitted
-    monkeypatch.setattr(btf_tile, "fit_tile", lambda *a: pytest.fail("a finished material was fitted again"))
+    monkeypatch.setattr(btf_tile, "fit_tiles", lambda *a, **k: pytest.fail("a finished material was fitted again"))
     assert main(args) == 0
     assert {r["status"] for r in json.loads((out / "summary.json").read_text())["materials"]} == {"done before"}
     # another model into the same folder: refused, nothing touched
@@ -116,16 +116,17 @@ def _recording(bars: list):
 def test_an_interrupted_run_resumes_the_unfinished_material_with_one_bar(database, singles, tmp_path, monkeypatch):
     bars: list = []
     monkeypatch.setattr(btf_database, "progress_bar", _recording(bars))
-    real = btf_tile.fit_tile
+    monkeypatch.setitem(btf_tile.GROUP_TEXELS, "cpu", 16)  # a group of one 4 x 4 tile: the unit of a resume
+    real = btf_tile.fit_tiles
     calls = []
 
-    def interrupted(b, t, *args):
+    def interrupted(b, tiles, *args, **kwargs):
         if len(calls) == 2:  # cork's one tile and felt's first are done
             raise KeyboardInterrupt
-        calls.append((b.name, t))
-        return real(b, t, *args)
+        calls.extend((b.name, t) for t in tiles)
+        return real(b, tiles, *args, **kwargs)
 
-    monkeypatch.setattr(btf_tile, "fit_tile", interrupted)
+    monkeypatch.setattr(btf_tile, "fit_tiles", interrupted)
     out, cache = tmp_path / "out", tmp_path / "cache"
     with pytest.raises(KeyboardInterrupt):
         brdffit.fit_btf_database(database, "lambert", out=out, tile=4, cache_dir=cache)
@@ -138,11 +139,11 @@ def test_an_interrupted_run_resumes_the_unfinished_material_with_one_bar(databas
 
     calls.clear()
 
-    def counted(b, t, *args):
-        calls.append((b.name, t))
-        return real(b, t, *args)
+    def counted(b, tiles, *args, **kwargs):
+        calls.extend((b.name, t) for t in tiles)
+        return real(b, tiles, *args, **kwargs)
 
-    monkeypatch.setattr(btf_tile, "fit_tile", counted)
+    monkeypatch.setattr(btf_tile, "fit_tiles", counted)
     result = brdffit.fit_btf_database(database, "lambert", out=out, tile=4, cache_dir=cache)
     assert calls == [("felt", 1), ("felt", 2), ("felt", 3), ("wool", 0), ("wool", 1)]
     assert list(cache.iterdir()) == []

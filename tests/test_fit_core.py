@@ -275,22 +275,23 @@ def test_fit_batch_matches_single_fits():
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     """seconds: compile and run of the grid start plus those of each scipy solve (time shifted by
     known amounts here, so that the sums cannot hold by chance of zero compile times)."""
-    from brdffit.fitting import init, solver_scipy
+    from brdffit.fitting import lanes, solver_scipy
 
     seen = {"init": [], "solve": []}
-    real_starts, real_solve = init.best_starts, solver_scipy.solve_scipy
+    real_stage, real_solve = lanes.run_stage, solver_scipy.solve_scipy
 
-    def best_starts(*a, **kw):
-        starts, losses, c_s, r_s = real_starts(*a, **kw)
+    def run_stage(key, *a, **kw):
+        out, c_s, r_s = real_stage(key, *a, **kw)
+        assert key[0] == "start"  # the grid of starts: scipy's only compiled stage
         seen["init"].append((c_s + 1.0, r_s + 2.0))
-        return starts, losses, c_s + 1.0, r_s + 2.0
+        return out, c_s + 1.0, r_s + 2.0
 
     def solve_scipy(*a, **kw):
         *out, c_s, r_s = real_solve(*a, **kw)
         seen["solve"].append((c_s + 10.0, r_s + 100.0))
         return (*out, c_s + 10.0, r_s + 100.0)
 
-    monkeypatch.setattr(init, "best_starts", best_starts)
+    monkeypatch.setattr(lanes, "run_stage", run_stage)
     monkeypatch.setattr(solver_scipy, "solve_scipy", solve_scipy)
     r = fit(_measurement(n=200), "ggx", solver="scipy", multistart=2)
     assert len(seen["init"]) == 1 and len(seen["solve"]) == 3
@@ -330,9 +331,11 @@ def test_a_fits_compile_and_run_seconds_lie_within_its_wall_time():
 def test_progress_hears_every_phase_and_compiling_only_when_it_compiles():
     notes = []
     m = _measurement(n=200)
-    fit(m, "lambert", rtol=2.3456e-7, progress=notes.append)  # an rtol of its own: a new program
-    assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "solved"], notes
-    assert notes[2].startswith("compiling: fit (")
+    fit(m, "lambert", rtol=2.3456e-7, progress=notes.append)  # an rtol of its own: new programs
+    phases = [n.split(":")[0] for n in notes]
+    assert [p for i, p in enumerate(phases) if i == 0 or p != phases[i - 1]] == ["initialising", "solving", "compiling",
+                                                                                  "solved"], notes
+    assert any(n.startswith("compiling: round (") for n in notes), notes  # the solver's stage, its own rtol
     again = []
     fit(m, "lambert", rtol=2.3456e-7, progress=again.append)
     assert [n.split(":")[0] for n in again] == ["initialising", "solving", "solved"], again
@@ -342,7 +345,7 @@ def test_progress_hears_the_start_grid_compile_on_the_scipy_path():
     notes = []
     fit(_measurement(n=137), "lambert", loss="l2", solver="scipy", progress=notes.append)  # shapes of its own
     assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "solved"], notes
-    assert notes[2].startswith("compiling: init (")
+    assert notes[2].startswith("compiling: start (")
 
 
 def test_an_unknown_solver_name_is_named_by_make_solver():

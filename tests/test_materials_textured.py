@@ -140,7 +140,10 @@ def test_mitsuba_textured_xml_renders_each_texel_in_plain_mitsuba(tmp_path):
         got = np.load(image)[..., :3][::-1]  # image row i is texel row H - 1 - i (see the docstring)
         assert want.min() > 1e-4, name  # every texel lit and seen
         err = np.abs(got / want - 1.0)
-        assert err.max() < 2e-5, (name, float(err.max()))  # float32 rendering against float64 JAX: ~1e-6
+        # float32 rendering against float64 JAX: ~1e-6; roughplastic's formula reads its precomputed terms
+        # from smooth tables of Mitsuba's quadratures, within 2.5e-3 of Mitsuba (tests/test_native_models.py)
+        tolerance = 2.5e-3 if name == "mitsuba:roughplastic" else 2e-5
+        assert err.max() < tolerance, (name, float(err.max()))
 
 
 def test_roughplastic_with_a_varying_alpha_is_refused_naming_it(tmp_path, capsys):

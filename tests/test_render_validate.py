@@ -179,9 +179,10 @@ def test_failure_leaves_nothing_behind(tmp_path, monkeypatch):
 
 def test_identical_images_give_strict_json(tmp_path):
     m = ggx_measurement()
-    # a Lambertian table is reproduced exactly by the interpolator: identical images, PSNR = inf
-    flat = m.replace(values=np.full((6561, 3), 0.2))
-    v = validate(flat, ("lambert", {"kd": 0.2 * np.pi}), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
+    # a Lambertian table is reproduced exactly by the interpolator, and lambert with kd = pi is exactly
+    # 1 in single precision too (kd / pi, both the same float32): identical images, PSNR = inf
+    flat = m.replace(values=np.full((6561, 3), 1.0))
+    v = validate(flat, ("lambert", {"kd": np.pi}), lights=default_lights(1), size=16, spp=1, out=tmp_path / "v")
     assert v.metrics["overall"]["psnr"] == float("inf")
     text = (tmp_path / "v" / "metrics.json").read_text()
     assert json.loads(text)["overall"]["psnr"] is None and "Infinity" not in text

@@ -26,6 +26,18 @@ def lambert_note(model) -> str:
             f"`{model.name}` (its parameters are then named {model.name}1.*)")
 
 
+def mitsuba_note(model) -> str:
+    """How a fit of ``model`` renders in Mitsuba (SPEC 8, 13), parameter maps included."""
+    if model.target == "mitsuba":
+        from ..materials.textured_mitsuba import TEXTURED
+
+        plugin = model.name.split(":", 1)[1]
+        numbers = [p for p in model.param_names if p not in TEXTURED[plugin]]
+        return (f"Mitsuba's own {plugin} plugin, every variant; parameter maps as its textures"
+                + (f" ({', '.join(numbers)}: one number each)" if numbers else ""))
+    return "the brdffit plugin (this formula translated), every variant, symbolic, differentiable, maps as textures"
+
+
 def describe(model) -> str:
     """Name, citation, parameter table (name, channels, bounds, default, role), and notes."""
     lines = [f"{model.name}  ({'reciprocal' if model.reciprocal else 'not reciprocal'})",
@@ -34,6 +46,7 @@ def describe(model) -> str:
     note = lambert_note(model)
     if note:
         lines.append(f"  note: {note}")
+    lines.append(f"  in Mitsuba: {mitsuba_note(model)}")
     return "\n".join(lines)
 
 

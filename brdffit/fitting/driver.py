@@ -116,14 +116,14 @@ class _Run:
             subset = _init.subset_rows(Data(*(a if a.ndim == r else a[0] for a, r in zip(self.data, (2, 2, 2, 2, 2, 1)))))
         key = (self.model, o.loss, k, True, self.plan.lanes)
         out, c_s, r_s = _lanes.run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
-                                         (points, lo, hi, free, self.anchor, subset), self.plan)
+                                         (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)
         self._count(c_s, r_s, init=True)
         return out[0]
 
     def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> _lanes.Rounds:
         o = self.options
         r = _lanes.solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                                self.bounds, self.plan, progress=progress)
+                                self.bounds, self.plan, progress=progress, note=self.note)
         self._count(r.compile_s, r.run_s)
         return r
 
@@ -132,7 +132,7 @@ class _Run:
 
         key = (self.model, self.options.loss, metrics, jtj, self.plan.lanes)
         out, c_s, r_s = _lanes.run_stage(("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (),
-                                         self.plan)
+                                         self.plan, note=self.note)
         self._count(c_s, r_s)
         return out
 

@@ -41,8 +41,10 @@ from .problem import Data
 #: grouped (processes, Dask workers, a resumed run).
 CPU_CHUNK = 64
 CPU_LANES = 1
-#: Lanes per compiled call on an accelerator, all vectorised.
+#: Lanes per compiled call on an accelerator, all vectorised, at most: ggx on UBO-81 took 30 GB of an H200
+#: at 16,384 lanes (about 2 MB a lane), so a device with less memory gets fewer (``plan``).
 DEVICE_CHUNK = 16384
+DEVICE_BYTES_PER_LANE = 2 * 2**20
 #: Solver steps per round (see :func:`solve_rounds`), and the lanes below which the rest run in one call.
 ROUND_STEPS = 4
 ROUND_MIN_LANES = 4
@@ -57,8 +59,8 @@ class Plan:
     lanes: int
     workers: int
     devices: tuple
-    #: Ratio of one compiled size to the next (``sizes``): on an accelerator a program takes many seconds to
-    #: compile and idle lanes of a call cost little, so fewer sizes, farther apart.
+    #: Ratio of one compiled size to the next (``sizes``): on an accelerator a program takes seconds to
+    #: compile, so few sizes there (measured on an H200: 12 s of compiling in a first run).
     step: int = 4
 
     def sizes(self, n: int) -> list[tuple[int, int]]:
@@ -80,15 +82,27 @@ def plan(chunk: int | None = None, lanes: int | None = None) -> Plan:
     if devices[0].platform == "cpu":
         lanes = lanes or CPU_LANES
         chunk = chunk or CPU_CHUNK
-        workers = max(1, min(os.cpu_count() or 1, 8))
+        workers = max(1, min(_cores(), 8))
         devices = devices[:1]  # several host "devices" share the same cores: threads use them
     else:
-        chunk = chunk or DEVICE_CHUNK
+        if chunk is None:
+            limit = (devices[0].memory_stats() or {}).get("bytes_limit", 0)
+            fits = int(0.5 * limit / DEVICE_BYTES_PER_LANE) if limit else DEVICE_CHUNK
+            chunk = max(256, min(DEVICE_CHUNK, fits))
         lanes = lanes or chunk
         workers = 1
     unit = lanes * len(devices)
     chunk = max(unit, -(-chunk // unit) * unit)
     return Plan(chunk=chunk, lanes=lanes, workers=workers, devices=devices, step=4 if devices[0].platform == "cpu" else 256)
+
+
+def _cores() -> int:
+    """The cores this process may run on (its affinity: a container's or ``taskset``'s share, not the
+    machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _rows(a, idx):
@@ -106,11 +120,11 @@ def _place(tree, devices):
 
 
 def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared: tuple, p: Plan, *,
-              on_chunk=None) -> tuple[dict, float, float]:
+              on_chunk=None, note=None) -> tuple[dict, float, float]:
     """``build()(lane_args, data, *shared)`` (a stage of ``stages``) for every lane: ``lane_args`` a pytree
     of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
     lane reads. Returns (the outputs as NumPy with the lane axis first, compile seconds, run seconds).
-    ``on_chunk(lanes)`` is called after each call."""
+    ``on_chunk(lanes)`` is called after each call; ``note(text)`` hears of a compile."""
     from .stages import per_lane
 
     fits = np.asarray(fits)
@@ -136,7 +150,7 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
     for _, padded in calls:  # compile (or load) each size once, before the calls run on threads
         size = len(padded)
         if size not in programs:
-            programs[size], c_s = compiled(key, build, *call_args(padded))
+            programs[size], c_s = compiled(key, build, *call_args(padded), note=note)
             compile_s += c_s
 
     def run(call):
@@ -170,7 +184,7 @@ class Rounds(NamedTuple):
 
 
 def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
-                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None) -> Rounds:
+                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None, note=None) -> Rounds:
     """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
     at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
     ``bounds``: (lo, hi, free). A stock optimistix solver runs all its steps in one round.
@@ -195,7 +209,7 @@ def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_st
         build_args = (model, loss, solver, rtol, atol, max_steps, first, p.lanes)
         lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
         res, c_s, r_s = run_stage(("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
-                                  fits[active], (*bounds, np.int32(steps)), p)
+                                  fits[active], (*bounds, np.int32(steps)), p, note=note)
         compile_s, run_s = compile_s + c_s, run_s + r_s
         v_new, resume, done, code, took = res
         if state is None:

@@ -24,7 +24,7 @@ import optimistix as optx
 from ..models.base import Model
 from .linalg import inverse_quadratic_form, spd_solve
 from .problem import flat_residual
-from .stages import Resume
+from .state import Resume
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Array, Bool, Float, Int

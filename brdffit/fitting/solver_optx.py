@@ -70,7 +70,7 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
     """run(v0 (P,), data, lo, hi, free, consts) -> (v, Resume, done, code, steps) with the stock solver
     ``name`` (``Resume``: the loss at v and at v0, J^T J at v; the damping entries 0: a stock solve does
     not continue); ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
-    from .stages import Resume
+    from .state import Resume
     from .structure import gauss_newton_matrix
 
     fn = flat_residual(model, loss)

@@ -9,7 +9,7 @@ once, not once per texel, and one compiled program serves any number of fits of 
 - :func:`start_stage`: the variable-projection grid (``init``) on a subset of the samples, and any
   starts the caller gives, ranked by their loss there: the ``k`` best starts of each lane.
 - :func:`round_stage`: at most ``steps`` solver steps of each lane, from its start or from the
-  state the previous round left (``solver_lm.Resume``): the driver lets the lanes that are done
+  state the previous round left (``state.Resume``): the driver lets the lanes that are done
   leave between rounds, so that a vectorised chunk does not run every lane until its slowest
   converges. optimistix's stock solvers cannot resume: one round with every step.
 - :func:`finish_stage`: the fit's loss afresh (the check of a solver's claim), and, for a result of
@@ -25,7 +25,6 @@ without tracing, and without importing optimistix.
 from __future__ import annotations
 
 import functools
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -35,6 +34,7 @@ from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
 from .problem import Data, flat_residual, values_metrics
+
 
 #: Solvers that run compiled (and vectorise): everything but scipy.
 COMPILED_SOLVERS = SOLVERS[:-1]
@@ -95,21 +95,6 @@ def _solve_dtype(data: Data) -> Data:
     return data._replace(ref=data.ref.astype(dtype))
 
 
-class Resume(NamedTuple):
-    """What a solve continues from (``options["resume"]`` of ``solver_lm``): the last round's loss ``c``, the
-    start's loss ``c0``, the gradient and Gauss-Newton matrix at the point, and the damping ``lam``, ``nu``.
-    A fit is solved in rounds of a few steps (:func:`round_stage`): between rounds the fits that are done
-    leave the batch, the others go on from here, as one long solve would. (Defined here, not beside the
-    solver: a compiled round kept on disk names this type, and loading it must not import optimistix.)"""
-
-    c: jax.Array
-    c0: jax.Array
-    g: jax.Array
-    H: jax.Array
-    lam: jax.Array
-    nu: jax.Array
-
-
 # -- stages -----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
 def start_stage(model: Model, loss: str, k: int, grid: bool, lanes: int):
@@ -152,7 +137,7 @@ def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, 
                 lanes: int):
     """run((v (L, P), resume), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)):
     at most ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v
-    (``resume`` is None); else from the previous round's ``resume`` (``solver_lm.Resume``, one row per
+    (``resume`` is None); else from the previous round's ``resume`` (``state.Resume``, one row per
     lane). A stock solver (not resumable) runs ``max_steps`` in its one round; its ``resume`` holds the loss
     at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
     from .solve import fit_constants, solve_one  # optimistix: imported only when a program is traced

@@ -52,7 +52,9 @@ def _property(name: str, value, indent: str) -> list[str]:
         rgb = ", ".join(_number(v) for v in value["value"])
         return [f'{indent}<rgb name="{_attr(name)}" value="{rgb}"/>']
     if isinstance(value, Mapping) and value.get("type") == "spectrum":
-        return [f'{indent}<spectrum name="{_attr(name)}" value="{_number(value["value"])}"/>']
+        v = value["value"]  # one value, or (wavelength, value) pairs: "400:0.1, 500:0.2"
+        text = ", ".join(f"{_number(w)}:{_number(x)}" for w, x in v) if isinstance(v, (list, tuple)) else _number(v)
+        return [f'{indent}<spectrum name="{_attr(name)}" value="{text}"/>']
     if isinstance(value, Mapping) and "type" in value:  # a nested plugin (a texture)
         return _plugin("texture", value, indent, name=name)
     raise TypeError(f"property {name!r}: no Mitsuba XML form for {type(value).__name__} {value!r}")

@@ -20,7 +20,10 @@ with Mitsuba's isotropic GGX D, its separable Smith G1 and its exact conductor F
 term. Mitsuba's ``eval`` returns f_r (n.l) (with si.wi the view): this formula equals it
 (tests/test_native_models.py). ``native()`` writes every setting the formula relies on: the plugin's
 default distribution is Beckmann (9.6 % off GGX at alpha 0.3), so ``distribution`` is always
-``ggx``; ``eta``/``k`` are written as RGB values, so no ``material`` preset applies.
+``ggx``; ``eta``/``k`` are written as spectra (so no ``material`` preset applies) that Mitsuba's RGB
+variants integrate back to the fitted RGB values exactly and whose Fresnel reflectance, in its
+spectral variants, has the fitted RGB colour at every angle (``brdffit.models._spectra``; RGB values
+would be upsampled channel by channel and clipped to [0, 1] there: a purple fit rendered olive).
 ``specular_reflectance`` is not fitted and keeps the plugin's default, 1 (SPEC 13): the complex IOR
 alone spans every reflectance curve a scale would, and a scale beside it leaves the fit a flat
 direction (s F(eta, k) = s' F(eta', k') along a curve; measured: no 2 % recovery of eta, k or s, and
@@ -35,7 +38,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from . import _math as m
-from ._mitsuba_math import fresnel_conductor, ggx_d, ggx_halfwidth, rgb, smith_g1
+from ._mitsuba_math import fresnel_conductor, ggx_d, ggx_halfwidth, rgb, smith_g1, spectrum
+from ._spectra import WAVELENGTHS, conductor_spectra
 from .base import Lobe, Model, Param, Proposal
 
 PARAMS = (
@@ -55,12 +59,13 @@ def formula(p, wi, wo):
 
 
 def to_native(p) -> dict:
+    eta, k = conductor_spectra(p["eta"], p["k"])
     return {
         "type": "roughconductor",
         "distribution": "ggx",
         "alpha": float(p["alpha"][0]),
-        "eta": rgb(p["eta"]),
-        "k": rgb(p["k"]),
+        "eta": spectrum(WAVELENGTHS, eta),
+        "k": spectrum(WAVELENGTHS, k),
         "specular_reflectance": rgb([1.0, 1.0, 1.0]),  # the plugin's default, written
     }
 

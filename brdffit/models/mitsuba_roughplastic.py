@@ -37,8 +37,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from . import _math as m
-from ._mitsuba_math import (external_transmittance, fresnel_dielectric, ggx_d, ggx_halfwidth, internal_reflectance,
-                            lerp_table, rgb, smith_g1)
+from ._mitsuba_math import fresnel_dielectric, ggx_d, ggx_halfwidth, lerp_table, rgb, rough_tables, smith_g1
 from .base import Lobe, Model, Param, Proposal
 
 #: The exterior medium's IOR written into every export (vacuum): eta = int_ior.
@@ -60,8 +59,7 @@ def formula(p, wi, wo):
     f, _, _ = fresnel_dielectric(jnp.clip(m.dot(wo, h), 0.0, 1.0), eta)
     cos_i, cos_o = m.cos_theta(wi), m.cos_theta(wo)
     specular = p["specular_reflectance"] * f * d * g / (4.0 * cos_i * cos_o)
-    table = external_transmittance(alpha[0], eta[0])
-    r_int = internal_reflectance(alpha[0], eta[0])
+    table, r_int = rough_tables(alpha[0], eta[0])
     t_i, t_o = lerp_table(table, cos_i), lerp_table(table, cos_o)
     diffuse = p["diffuse_reflectance"] / (1.0 - r_int) * t_i * t_o / (jnp.pi * eta * eta)
     return specular + diffuse

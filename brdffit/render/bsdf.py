@@ -2,24 +2,24 @@
 
 Three kinds of source (SPEC 6):
 
-- an analytic model (a FitResult, or a ``(model_name, params)`` pair): rendered by
-  :class:`CallbackBSDF`, a Python ``mi.BSDF`` whose ``eval`` hands Mitsuba's direction arrays to
-  the very JAX ``model.eval`` the fitter uses. There is no second formula in Dr.Jit, so the
-  rendered material cannot drift from the fitted one.
-- a UBO-81 ``Measurement``: the same :class:`CallbackBSDF` around the NumPy interpolator of
-  :mod:`brdffit.render.tabulated`.
+- an analytic model (a FitResult, or a ``(model_name, params)`` pair): the very BSDF a user gets
+  from ``fit.to_mitsuba()`` (:func:`brdffit.render.export.model_bsdf`): Mitsuba's own plugin for a
+  ``mitsuba:*`` fit, otherwise the model's JAX formula translated for Mitsuba
+  (:mod:`brdffit.render.symbolic_bsdf`). What is validated is what users render.
+- a UBO-81 ``Measurement``: :class:`CallbackBSDF`, a Python ``mi.BSDF`` whose ``eval`` hands
+  Mitsuba's direction arrays to the NumPy interpolator of :mod:`brdffit.render.tabulated`.
 - an RGL ``.bsdf`` file: Mitsuba's built-in ``measured`` plugin, the full-resolution reference.
 
 How the callback works. Mitsuba dispatches ``bsdf.eval`` through a Dr.Jit virtual call. With
 ``JitFlag.SymbolicCalls`` off (set by :func:`evaluated_calls`) the call is *evaluated*: Dr.Jit runs
 the kernel up to the call, hands the Python method concrete arrays holding only the lanes that
-reached this BSDF, and the method may leave Dr.Jit (to NumPy, to JAX) and come back. In the
-``scalar_rgb`` fallback every sample calls the method with scalars: correct, but slow.
+reached this BSDF, and the method may leave Dr.Jit (to NumPy) and come back. In the ``scalar_rgb``
+fallback every sample calls the method with scalars: correct, but slow.
 
 Conventions at the boundary (SPEC 1): in Mitsuba's ``eval(ctx, si, wo)``, ``si.wi`` points to the
 camera (our ``wo``, the view) and ``wo`` points to the light (our ``wi``), both in the local
-shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). This module is the only place
-that converts between the two.
+shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). The callback here and the symbolic
+BSDF (:mod:`brdffit.render.symbolic_bsdf`) are the only places that convert between the two.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._mitsuba import evaluated_calls, mitsuba  # noqa: F401 - evaluated_calls: importable from here
+from .._mitsuba import evaluated_calls  # noqa: F401 - importable from here
 # f_r of an analytic model: the one evaluator (fitting.model_eval, FitResult.eval's too); of any
 # Mitsuba BSDF outside a render: .evaluate (eval_bsdf stays importable from here, with evaluated_calls).
 from ..fitting.model_eval import eval_model, warm
@@ -87,74 +87,24 @@ def _vec_to_numpy(v) -> np.ndarray:
 
 
 @functools.cache
-def mixture_sampling(variant: str):
-    """``pdf``, ``eval_pdf`` and ``sample`` of brdffit's Python BSDFs (as a class whose methods they
-    take over: nanobind classes take one base only): directions
-    drawn from the lobe mixture ``self.mixture`` (:mod:`brdffit.render.sampling`), values from
-    ``self._eval_cos(si, wo, active)`` (f_r cos theta_light); a sample's weight is eval / pdf."""
-    from .._mitsuba import user_mitsuba
-
-    mi = user_mitsuba()
-    import drjit as dr
-
-    scalar = variant.startswith("scalar")
-
-    class MixtureSampling:
-        def pdf(self, ctx, si, wo, active=True):
-            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
-            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
-            bs.wo = wo
-            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
-            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            value = self._eval_cos(si, wo, ok)
-            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
-
-    return MixtureSampling
-
-
-def bsdf_class_setup(variant: str):
-    """(mi, dr, scalar, sampling) for a Python BSDF class of ``variant``, which must be the active
-    one: the Mitsuba and Dr.Jit modules, whether it is a scalar variant, :func:`mixture_sampling`."""
-    from .._mitsuba import user_mitsuba
-
-    mi = user_mitsuba()
-    if mi.variant() != variant:
-        raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
-    import drjit as dr
-
-    return mi, dr, variant.startswith("scalar"), mixture_sampling(variant)
-
-
-@functools.cache
 def _callback_class(variant: str):
     """The CallbackBSDF class of one Mitsuba variant, defined on first use (it subclasses mi.BSDF)."""
     from .._mitsuba import symbolic_scope
-    from .sampling import Mixture
+    from .sampling import Mixture, bsdf_class_setup
 
     mi, dr, scalar, sampling = bsdf_class_setup(variant)
 
     class CallbackBSDF(mi.BSDF):
-        """A reflective BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.
+        """A reflective RGB BSDF whose f_r is any NumPy function of (wi, wo); see the module docstring.
 
-        ``sample`` and ``pdf`` follow a :class:`~brdffit.render.sampling.Mixture` of the model's
-        lobes (cosine-weighted for a table); ``eval``, ``pdf`` and ``sample`` agree: a sample's
-        weight is eval / pdf at the sampled direction.
+        ``sample`` and ``pdf`` follow a :class:`~brdffit.render.sampling.Mixture` (cosine-weighted
+        unless given); ``eval``, ``pdf`` and ``sample`` agree: a sample's weight is eval / pdf at the
+        sampled direction.
         """
 
-        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback", mixture=None, uv_brdf=None):
+        def __init__(self, props, brdf: BrdfFn | None = None, label: str = "callback", mixture=None):
             mi.BSDF.__init__(self, props)
             self.brdf = brdf
-            #: f_r(wi, wo, uv) for parameter maps (uv: (N, 2) surface coordinates), else None
-            self.uv_brdf = uv_brdf
             self.label = label
             self.mixture = mixture if mixture is not None else Mixture.cosine()
             self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
@@ -176,14 +126,7 @@ def _callback_class(variant: str):
                 light, view = np.broadcast_to(light, (n, 3)), np.broadcast_to(view, (n, 3))
             up = (light[:, 2] > 0) & (view[:, 2] > 0)
             value = np.zeros((light.shape[0], 3))
-            if up.any() and self.uv_brdf is not None:
-                if scalar:
-                    uv = np.array([[si.uv.x, si.uv.y]], np.float64)
-                else:
-                    uv = np.stack([np.asarray(si.uv.x, np.float64), np.asarray(si.uv.y, np.float64)], -1).reshape(-1, 2)
-                uv = np.broadcast_to(uv, (light.shape[0], 2))
-                value[up] = np.asarray(self.uv_brdf(light[up], view[up], uv[up]), np.float64) * light[up, 2:3]
-            elif up.any():
+            if up.any():
                 f = np.asarray(self.brdf(light[up], view[up]), np.float64)
                 # No clean-up of NaN or negative values: the image shows the BRDF as it is (and the
                 # tests that every model renders finite, non-negative images mean something).
@@ -208,14 +151,14 @@ def _callback_class(variant: str):
     return CallbackBSDF
 
 
-def callback_bsdf(brdf: BrdfFn | None, label: str = "callback", mixture=None, uv_brdf=None):
+def callback_bsdf(brdf: BrdfFn, label: str = "callback", mixture=None):
     """A Mitsuba BSDF object evaluating ``brdf`` (a NumPy f_r) through :class:`CallbackBSDF`,
-    sampled by ``mixture`` (a :class:`~brdffit.render.sampling.Mixture`; cosine when None);
-    ``uv_brdf(wi, wo, uv)`` instead of ``brdf`` for parameter maps."""
+    sampled by ``mixture`` (a :class:`~brdffit.render.sampling.Mixture`; cosine when None). Scenes
+    holding it render inside :func:`evaluated_calls` (RGB variants)."""
     from .._mitsuba import user_mitsuba
 
     mi = user_mitsuba()
-    return _callback_class(mi.variant())(mi.Properties(), brdf=brdf, label=label, mixture=mixture, uv_brdf=uv_brdf)
+    return _callback_class(mi.variant())(mi.Properties(), brdf=brdf, label=label, mixture=mixture)
 
 
 def measured_bsdf(path: str | Path):
@@ -263,15 +206,13 @@ class Source:
         if self._bsdf is None:
             if self.kind == "rgl":
                 self._bsdf = measured_bsdf(self.path)
-            elif self.model is not None and self.model.target == "mitsuba":
-                # a native fit renders with Mitsuba's own plugin: what is validated is what the user
-                # will render (the JAX formula equals it: tests/test_native_models.py)
-                self._bsdf = mitsuba().load_dict(self.model.native(self.params))
-            else:
-                from .sampling import Mixture
+            elif self.model is not None:
+                # the BSDF users get from fit.to_mitsuba(): what is validated is what they render
+                from .export import model_bsdf
 
-                mixture = Mixture.for_model(self.model, self.params) if self.model is not None else None
-                self._bsdf = callback_bsdf(self._brdf, self.label, mixture)
+                self._bsdf = model_bsdf(self.model, {k: np.asarray(v, np.float64) for k, v in self.params.items()})
+            else:
+                self._bsdf = callback_bsdf(self._brdf, self.label)
         return self._bsdf
 
     def brdf(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:

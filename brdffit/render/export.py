@@ -2,11 +2,12 @@
 written by :mod:`brdffit.materials.mitsuba_xml`, with every material format).
 
 The plugin is the symbolic BSDF of :mod:`brdffit.render.symbolic_bsdf`: ``eval`` is the JAX
-``model.eval`` the fit was made with, translated to Dr.Jit (one definition of the formula, two
-tracers), ``sample``/``pdf`` the lobe mixture of :mod:`brdffit.render.sampling`; where a formula
-cannot be translated, the callback BSDF of :mod:`brdffit.render.bsdf` (render those scenes inside
-:func:`brdffit.evaluated_calls`). Its properties are the model name and the parameters, each under
-its SPEC name with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` -> ``ggx1_ks``)::
+``model.eval`` the fit was made with, translated for Dr.Jit and for Python floats (one definition of
+the formula, two tracers), ``sample``/``pdf`` the lobe mixture of :mod:`brdffit.render.sampling`; it
+renders in every variant (RGB, spectral, mono, polarized; scalar and JIT) and mode. A ``mitsuba:*``
+model is Mitsuba's own plugin (SPEC 13), also when named in a ``brdffit`` plugin. Its properties are the model name and the parameters, each under
+its SPEC name with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` -> ``ggx1_ks``), each
+a number, an RGB triple, a spectrum or a nested texture, as Mitsuba's own plugins take them::
 
     <bsdf type="brdffit" id="paint">
         <string name="model" value="ggx"/>
@@ -29,6 +30,8 @@ or, from Python, ``mi.load_dict({..., "bsdf": fit.to_mitsuba()})``.
 """
 
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
@@ -57,12 +60,13 @@ def _model_and_params(model_or_fit, params):
 
 
 def _plugin(props):
-    """Constructor of the ``brdffit`` plugin: the model in ``props`` as a :mod:`symbolic_bsdf` (its JAX
-    formula run by Dr.Jit), or the callback BSDF where the formula cannot be translated."""
+    """Constructor of the ``brdffit`` plugin: the model in ``props`` (each parameter a number, an RGB
+    triple, a spectrum or a nested texture) as :func:`model_bsdf` makes it."""
     from .. import models
-    from .bsdf import _callback_class, model_brdf
-    from .sampling import Mixture
+    from .._mitsuba import user_mitsuba
+    from .symbolic_bsdf import Texture
 
+    mi = user_mitsuba()
     names = [str(k) for k in props.keys()]
     if "model" not in names:
         raise ValueError("brdffit BSDF: needs a string property 'model' (e.g. <string name=\"model\" value=\"ggx\"/>)")
@@ -77,32 +81,48 @@ def _plugin(props):
     missing = sorted(k for k in by_key if k not in names)
     if missing:
         raise ValueError(f"brdffit BSDF ({model.name}): missing parameters {missing}")
-    params = model.check_params({by_key[k]: np.asarray(props[k], np.float64).reshape(-1) for k in by_key})
+    params = {}
+    for key, name in by_key.items():
+        value = props[key]
+        if isinstance(value, mi.Texture):
+            params[name] = Texture(value)
+        elif props.type(key) == mi.Properties.Type.Spectrum:  # a spectrum, read as Mitsuba's own plugins read one
+            params[name] = Texture(props.get_texture(key))
+        else:
+            params[name] = np.asarray(value, np.float64).reshape(-1)
+    return model_bsdf(model, params, props)
+
+
+def model_bsdf(model, params, props=None):
+    """The one Mitsuba BSDF of an analytic model, for validation and for users alike: Mitsuba's own
+    plugin for a ``mitsuba:*`` model (SPEC 13), otherwise the symbolic BSDF of
+    :mod:`brdffit.render.symbolic_bsdf` -- the model's formula translated, in any variant and mode.
+    ``params`` maps each parameter to its values or a ``symbolic_bsdf.Texture``; the sampling
+    mixture follows the textures' mean values."""
     from .._mitsuba import user_mitsuba
-    from .drjit_formula import Unsupported
-    from .symbolic_bsdf import symbolic_bsdf
+    from .sampling import Mixture
+    from .symbolic_bsdf import Texture, symbolic_bsdf
 
-    mixture = Mixture.for_model(model, params)
-    try:  # the formula run by Dr.Jit: renders in any mode, no evaluated_calls() needed
-        return symbolic_bsdf(model, {k: np.asarray(v) for k, v in params.items()}, mixture,
-                             f"brdffit:{model.name}", props=props)
-    except Unsupported as exc:  # a formula the translation does not cover: the JAX callback
-        mi = user_mitsuba()
-        _refuse_unless_evaluated(mi, model, exc)
-        cls = _callback_class(mi.variant())
-        return cls(props, brdf=model_brdf(model, params), label=f"brdffit:{model.name}", mixture=mixture)
-
-
-def _refuse_unless_evaluated(mi, model, why) -> None:
-    """The callback BSDF answers only inside ``brdffit.evaluated_calls()`` (Dr.Jit's symbolic mode
-    cannot call Python with arrays; it traces the BSDF and gets zeros): a scene made outside it gets
-    one clear error naming the context, at load time, instead of rendering black without a word."""
-    from .._mitsuba import in_evaluated_calls
-
-    if mi.variant().startswith("scalar") or in_evaluated_calls():
-        return  # scalar variants and evaluated calls run the callback
-    raise ValueError(f"brdffit BSDF ({model.name}): its formula cannot run in Dr.Jit's symbolic mode ({why}); "
-                     "load and render scenes that hold it inside brdffit.evaluated_calls()")
+    mi = user_mitsuba()
+    textures = {k: v for k, v in params.items() if isinstance(v, Texture)}
+    means = {k: np.full(model.size(model.param(k)), float(np.mean(v.texture.mean())) * v.scale) for k, v in textures.items()}
+    checked = {k: np.asarray(v, np.float64) for k, v in model.check_params({**params, **means}).items()}
+    if model.target == "mitsuba":
+        native = model.native(checked)
+        for name, tex in textures.items():
+            if name not in native or tex.scale != 1.0:
+                raise ValueError(f"{model.name}: Mitsuba's {native['type']} plugin takes no texture for {name!r}")
+            native[name] = tex.texture
+        try:
+            return mi.load_dict(native)
+        except RuntimeError as exc:  # a property the plugin reads as one number (roughplastic's alpha)
+            found = re.search(r'The property "(\w+)" has the wrong type', str(exc))
+            if found is None:
+                raise
+            raise ValueError(f"{model.name}: Mitsuba's {native['type']} plugin takes one number for "
+                             f"{found.group(1)!r}, not a map (hold it fixed in the fit)") from None
+    values = {k: textures.get(k, checked[k]) for k in params}
+    return symbolic_bsdf(model, values, Mixture.for_model(model, checked), f"brdffit:{model.name}", props=props)
 
 
 def register_mitsuba() -> str:
@@ -135,65 +155,49 @@ def _is_map(params) -> bool:
 
 
 def map_bsdf(model, params):
-    """The callback BSDF of parameter *maps*: each parameter a value, or an (H, W) / (H, W, size)
-    array over the surface's uv. Texel (row i, column j) covers u in [j/W, (j+1)/W) and v in
-    [i/H, (i+1)/H): the layout of Mitsuba's own ``bitmap`` texture (nearest lookup, no filtering).
-    The formula is the JAX ``model.eval`` per texel; sampling follows the mixture of the map's mean
-    parameters (a valid density everywhere; best where texels are alike)."""
-    import jax
-    import jax.numpy as jnp
-
+    """The BSDF of parameter *maps*: each parameter a value, or an (H, W) / (H, W, size) array over the
+    surface's uv, as a Mitsuba ``bitmap`` texture (nearest lookup, no filtering; 3-channel maps are
+    upsampled like any colour texture, 1-channel ones read raw; a map of one value is that number). Texel (row i, column j) covers u in
+    [j/W, (j+1)/W) and v in [i/H, (i+1)/H): the layout of Mitsuba's own ``bitmap`` texture. The
+    formula is the model's translated one (:func:`model_bsdf`); sampling follows the mixture of the
+    map's mean parameters (a valid density everywhere; best where texels are alike)."""
     from .. import models
-    from ..fitting.model_eval import CHUNK, SMALL
-    from .bsdf import callback_bsdf, import_native
-    from .sampling import Mixture
+    from .._mitsuba import user_mitsuba
+    from .symbolic_bsdf import Texture
 
+    mi = user_mitsuba()
     model = models.get(model)
     shapes = {np.shape(v)[:2] for v in params.values() if np.ndim(v) >= 2}
     if len(shapes) != 1:
         raise ValueError(f"parameter maps must share one (H, W) shape, got {sorted(shapes)}")
     (height, width), = shapes
-    flat = {}
+    values = {}
     for p in model.params:
         if p.name not in params:
             raise ValueError(f"model {model.name!r}: missing parameter {p.name!r}")
         v = np.asarray(params[p.name], np.float64)
+        if v.ndim < 2:
+            values[p.name] = v.reshape(-1)
+            continue
         size = model.size(p)
-        v = v.reshape(height, width, -1) if v.ndim >= 2 else v.reshape(1, 1, -1)
-        flat[p.name] = np.broadcast_to(v, (height, width, size)).reshape(height * width, size)
-    mean = {k: v.mean(axis=0) for k, v in flat.items()}
-    import_native()
-    per_lane = jax.jit(jax.vmap(lambda q, a, b: model.eval(q, a[None], b[None])[0]))
-
-    def uv_brdf(wi, wo, uv):
-        col = np.clip(np.floor(uv[:, 0] * width), 0, width - 1).astype(np.int64)
-        row = np.clip(np.floor(uv[:, 1] * height), 0, height - 1).astype(np.int64)
-        texel = row * width + col
-        n = len(texel)
-        out = np.empty((n, model.channels))
-        length = SMALL if n <= SMALL else CHUNK  # two compiled shapes, as for a single parameter set
-        for start in range(0, n, length):
-            stop = min(n, start + length)
-            idx = np.zeros(length, np.int64)
-            idx[: stop - start] = texel[start:stop]
-            a = np.tile([0.0, 0.0, 1.0], (length, 1))
-            b = a.copy()
-            a[: stop - start], b[: stop - start] = wi[start:stop], wo[start:stop]
-            q = {k: jnp.asarray(v[idx]) for k, v in flat.items()}
-            out[start:stop] = np.asarray(per_lane(q, jnp.asarray(a), jnp.asarray(b)))[: stop - start]
-        return np.broadcast_to(out, (n, 3)) if out.shape[1] == 1 else out[:, :3]
-
-    return callback_bsdf(None, f"brdffit:{model.name} (maps {height}x{width})", Mixture.for_model(model, model.check_params(mean)),
-                         uv_brdf=uv_brdf)
+        data = np.broadcast_to(v.reshape(height, width, -1), (height, width, size))
+        if np.all(data.astype(np.float32) == data.astype(np.float32)[:1, :1]):  # one value: a number
+            values[p.name] = data[0, 0]
+            continue
+        # Mitsuba upsamples reflectances: a map above 1 is stored divided by its largest value
+        scale = max(1.0, float(data.max())) if size == 3 else 1.0
+        texture = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(data / scale, np.float32)),
+                                "raw": size == 1, "filter_type": "nearest", "wrap_mode": "clamp"})
+        values[p.name] = Texture(texture, scale)
+    return model_bsdf(model, values)
 
 
 def mitsuba_bsdf(model_or_fit, params=None):
     """A BSDF for ``mi.load_dict`` rendering ``model_or_fit`` (a FitResult, or a model name /
     Model with ``params``) in any Mitsuba 3 scene: the ``brdffit`` plugin's dict (registered here
     for the current variant). With parameter *maps* (any value an (H, W) or (H, W, size) array,
-    e.g. a per-texel BTF fit) it is a BSDF object instead, looked up by uv (see :func:`map_bsdf`);
-    it goes into a scene dict the same way. Render scenes that hold parameter maps inside
-    :func:`brdffit.evaluated_calls` (the maps are looked up per texel by JAX)."""
+    e.g. a per-texel BTF fit) it is a BSDF object instead, the maps as textures (see :func:`map_bsdf`);
+    it goes into a scene dict the same way and renders in any variant and mode like the plugin."""
     if not hasattr(model_or_fit, "params") and _is_map(params):
         return map_bsdf(model_or_fit, params)
     model, values = _model_and_params(model_or_fit, params)

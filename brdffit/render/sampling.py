@@ -1,4 +1,4 @@
-"""Importance sampling for the callback BSDF: a mixture of per-lobe proposals (Dr.Jit).
+"""Importance sampling for brdffit's Mitsuba BSDFs: a mixture of per-lobe proposals (Dr.Jit).
 
 The *formula* of a model stays its JAX ``model.eval`` (what ``eval`` returns and what a sample's
 weight is divided from). What this module adds is a sampling *density*: a valid pdf over outgoing
@@ -35,6 +35,7 @@ BRDF may reach (the approximate proposals) sampled.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -45,6 +46,7 @@ import numpy as np
 COS_NODES = np.array([0.05, 0.25, 0.5, 0.75, 1.0])
 #: Smallest share of the cosine lobe in the mixture.
 COSINE_FLOOR = 0.02
+_NODES = tuple(float(c) for c in COS_NODES)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,6 +178,7 @@ def _pdf_tools(variant: str):
     mi = user_mitsuba()
     assert mi.variant() == variant
 
+    @functools.lru_cache(maxsize=None)
     def microfacet(lobe):
         kind = mi.MicrofacetType.GGX if lobe.kind == "ggx" else mi.MicrofacetType.Beckmann
         return mi.MicrofacetDistribution(kind, float(lobe.shape[0]), float(lobe.shape[1]), True)
@@ -251,6 +254,7 @@ class Mixture:
     def __init__(self, lobes: list[Lobe], weights: np.ndarray):
         self.lobes = list(lobes)
         self.weights = np.asarray(weights, np.float64)  # (K, len(COS_NODES))
+        self._rows = [tuple(float(x) for x in row) for row in self.weights]
 
     @classmethod
     def cosine(cls) -> "Mixture":
@@ -269,6 +273,13 @@ class Mixture:
 
     def _weights(self, mi, dr, cos_wi):
         """Per-lane lobe probabilities, piecewise linear in cos theta of wi between COS_NODES."""
+        if isinstance(cos_wi, float):  # a scalar variant: one ray, plain numbers (the same function)
+            c = min(max(cos_wi, _NODES[0]), 1.0)
+            j = bisect.bisect_left(_NODES, c) - 1  # the last node below c (-1: c is the first node)
+            if j < 0:
+                return [row[0] for row in self._rows]
+            t = (c - _NODES[j]) / (_NODES[j + 1] - _NODES[j])
+            return [row[j] + t * (row[j + 1] - row[j]) for row in self._rows]
         c = dr.clip(cos_wi, COS_NODES[0], 1.0)
         out = []
         for row in self.weights:
@@ -283,7 +294,7 @@ class Mixture:
     def pdf(self, variant: str, wi, wo):
         mi, dr, _, pdf_lobe = _pdf_tools(variant)
         ws = self._weights(mi, dr, wi.z)
-        total = mi.Float(0.0)
+        total = 0.0 if isinstance(wi.z, float) else mi.Float(0.0)
         for lobe, w in zip(self.lobes, ws):
             total = total + w * pdf_lobe(lobe, wi, wo)
         return dr.select((wi.z > 0) & (wo.z > 0), total, 0.0)
@@ -292,9 +303,60 @@ class Mixture:
         """A direction wo: lobe chosen by s1 (cumulative weights), direction by s2."""
         mi, dr, sample_lobe, _ = _pdf_tools(variant)
         ws = self._weights(mi, dr, wi.z)
+        if isinstance(s1, float):  # one ray: draw from the chosen lobe only
+            k, acc = 0, ws[0]
+            while k + 1 < len(ws) and s1 >= acc:
+                k += 1
+                acc += ws[k]
+            return sample_lobe(self.lobes[k], wi, s2)
         wo = sample_lobe(self.lobes[0], wi, s2)
         acc = ws[0]
         for lobe, w in zip(self.lobes[1:], ws[1:]):
             wo = dr.select(s1 >= acc, sample_lobe(lobe, wi, s2), wo)
             acc = acc + w
         return wo
+
+
+@functools.cache
+def mixture_sampling(variant: str):
+    """``pdf``, ``eval_pdf`` and ``sample`` of brdffit's Python BSDFs (as a class whose methods they
+    take over: nanobind classes take one base only): directions drawn from the lobe mixture
+    ``self.mixture``, values from ``self._eval_cos(si, wo, active)`` (f_r cos theta_light, a spectrum
+    of the variant); a sample's weight is eval / pdf."""
+    mi, dr, sample_lobe, pdf_lobe = _pdf_tools(variant)
+    scalar = variant.startswith("scalar")
+    glossy = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+
+    class MixtureSampling:
+        def pdf(self, ctx, si, wo, active=True):
+            return dr.select(active, self.mixture.pdf(variant, si.wi, wo), 0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return self._eval_cos(si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            wo = self.mixture.sample(variant, si.wi, sample1, sample2)
+            bs = dr.zeros(mi.BSDFSample3f) if scalar else dr.zeros(mi.BSDFSample3f, dr.width(wo))
+            bs.wo = wo
+            bs.pdf = self.mixture.pdf(variant, si.wi, wo)
+            bs.eta = 1.0
+            bs.sampled_type = glossy
+            bs.sampled_component = mi.UInt32(0)
+            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+            value = self._eval_cos(si, wo, ok)
+            return bs, dr.select(ok, value / dr.maximum(bs.pdf, 1e-20), 0.0)
+
+    return MixtureSampling
+
+
+def bsdf_class_setup(variant: str):
+    """(mi, dr, scalar, sampling) for a Python BSDF class of ``variant``, which must be the active
+    one: the Mitsuba and Dr.Jit modules, whether it is a scalar variant, :func:`mixture_sampling`."""
+    from .._mitsuba import user_mitsuba
+
+    mi = user_mitsuba()
+    if mi.variant() != variant:
+        raise RuntimeError(f"brdffit: Mitsuba variant is {mi.variant()!r}, not {variant!r}")
+    import drjit as dr
+
+    return mi, dr, variant.startswith("scalar"), mixture_sampling(variant)
