@@ -153,6 +153,11 @@ def test_ctrl_c_at_a_fixed_moment_of_a_real_blend_export(blender, tmp_path, mome
     assert sorted(p.name for p in tmp.rglob("*")) == [], (code, err)
     if code == 0:  # the export ended before the signal
         assert [p.name for p in out.iterdir()] == ["paint.blend"]
+    elif code == -signal.SIGINT:
+        # The signal came before Python had installed its SIGINT handler (interpreter start-up, which
+        # a loaded machine can stretch past 0.1 s): the terminal's default action ended the process
+        # before any of brdffit ran -- what a shell shows as 130 -- so nothing may have been written.
+        assert err == "" and list(out.iterdir()) == [], (code, err)
     else:
         assert code == 130 and err.endswith("brdffit: interrupted\n") and "Traceback" not in err, (code, err)
         assert list(out.iterdir()) == []
