@@ -137,7 +137,7 @@ def accessor(doc, blob, index, dtype, width):
 
 def test_glb_holds_the_factors_on_an_outward_sphere(tmp_path):
     fit = a_fit("gltf:metallic_roughness", GLTF)
-    export(fit, tmp_path / "ball.glb")
+    fit.export(tmp_path / "ball.glb")  # SPEC 13's FitResult.export: brdffit.materials.export
     doc, blob = read_glb((tmp_path / "ball.glb").read_bytes())
     assert doc["asset"]["version"] == "2.0"
     (material,) = doc["materials"]
@@ -180,8 +180,8 @@ def test_convert_reports_its_error_against_the_source(source, params):
     from brdffit.grid import ubo_pairs
 
     fit = a_fit(source, params)
-    out = convert(fit, "gltf:metallic_roughness")
-    assert out.model.name == "gltf:metallic_roughness"
+    out = fit.convert("gltf:metallic_roughness")  # SPEC 13's FitResult.convert: brdffit.materials.convert
+    assert type(out) is FitResult and out.model.name == "gltf:metallic_roughness"
     c = out.options["converted_from"]
     assert c["model"] == source and c["grid"] == "ubo81"
     # the stored error is the error of the converted BRDF against the source's, computed here by hand

@@ -86,8 +86,9 @@ def fit(
                          scipy_jac=scipy_jac, bounds=bounds, fixed=fixed, physical=physical)
     mdl = resolve_model(model, measurement.n_channels)
     starts = None if init is None else start_vector(init, mdl, options.space(mdl))[None, :]
-    result, = fit_measurements([measurement], mdl, options, weights=weights, starts=starts, grid=init is None,
-                               check_given=init is not None, note=progress or (lambda _message: None))
+    result, = fit_measurements([measurement], mdl, options, result_type=FitResult, weights=weights, starts=starts,
+                               grid=init is None, check_given=init is not None,
+                               note=progress or (lambda _message: None))
     return with_warning(result, scene_note)
 
 
@@ -137,7 +138,7 @@ def fit_batch(
     if not grid and starts is None:
         raise UsageError("fit_batch: grid=False needs starts")
     with progress_bar(f"fit_batch {mdl.name}", n, shown=progress) as bar:
-        return fit_measurements(measurements, mdl, options, starts=starts, grid=grid,
+        return fit_measurements(measurements, mdl, options, result_type=FitResult, starts=starts, grid=grid,
                                 progress=lambda fraction: bar.advance(fraction * n))
 
 

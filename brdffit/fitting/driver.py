@@ -3,7 +3,9 @@
 ``brdffit.fit`` (one measurement), ``brdffit.fit_batch`` (many) and ``brdffit.fit_btf`` (the texels of a
 BTF, tile by tile) check their options into one :class:`~brdffit.fitting.options.FitOptions` and call
 :func:`solve` (arrays in, a :class:`Solved` record out: one row per fit, each with its status code) or
-:func:`fit_measurements` (measurements in, one ``FitResult`` per fit, built by one function). What
+:func:`fit_measurements` (measurements in, one ``FitResult`` per fit, built by one function, of the type
+its caller names: the driver is engine, below the renderers, figures and material files that a FitResult's
+methods call, so it does not import that class). What
 :func:`solve` runs, the same for one fit and for a million:
 
 1. starts: the variable-projection grid and any given starts, the best ``k`` of each fit
@@ -39,7 +41,6 @@ from .cache import compiled
 from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_values, prepare, resolve_model, stack
 from .._fit_defaults import STATUS_TEXT
-from .result import FitResult
 from .space import ParameterSpace, fit_warnings, sample_spacing
 from .structure import gauss_newton_matrix
 
@@ -319,10 +320,11 @@ def _solve_scipy(space: ParameterSpace, options: FitOptions, data: Data, fits: n
 
 
 def fit_measurements(measurements: Sequence[Measurement], model: str | Model, options: FitOptions, *,
-                     weights=None, starts=None, grid: bool = True, check_given: bool = False,
-                     note: Callable[[str], None] = _quiet, progress=None) -> list[FitResult]:
-    """Fit ``model`` to each measurement (same samples and channels) with ``options``; one FitResult
-    each. ``starts``: (n, P) flat vectors in the table's unit (already in the space), or None;
+                     result_type: type, weights=None, starts=None, grid: bool = True, check_given: bool = False,
+                     note: Callable[[str], None] = _quiet, progress=None) -> list:
+    """Fit ``model`` to each measurement (same samples and channels) with ``options``; one
+    ``result_type`` (:class:`brdffit.FitResult`) each. ``starts``: (n, P) flat vectors in the table's unit
+    (already in the space), or None;
     ``check_given``: see :func:`solve`. ``progress(fraction)``: called as the solves finish."""
     preps = [prepare(m, weights) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
@@ -349,8 +351,8 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     # else metrics, J^T J and loss afresh, in the table's unit (scipy: always)
     given_back = unit == 1.0 and res.metrics is not None
     # space.clip: fixed entries exactly at their values after the unit's round trip
-    results = [fit_result(space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]), int(res.steps[i]),
-                          res.start[i] * unscale, seconds=seconds, options_record=record,
+    results = [fit_result(result_type, space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]),
+                          int(res.steps[i]), res.start[i] * unscale, seconds=seconds, options_record=record,
                           value=float(res.loss[i]) if given_back else None,
                           metrics={key: float(x[i]) for key, x in res.metrics.items()} if given_back else None,
                           jtj=res.jtj[i] if given_back else None)
@@ -358,10 +360,10 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     return [with_warning(r, res.notes.get(i)) for i, r in enumerate(results)]
 
 
-def fit_result(space: ParameterSpace, options: FitOptions, measurement: Measurement, prep: Prepared, v, code: int,
-               steps: int, v0, *, seconds, options_record, value=None, metrics=None, jtj=None) -> FitResult:
-    """The FitResult of one fit at ``v`` (the table's unit); metrics, J^T J and the loss computed here
-    where the solve did not give them in that unit."""
+def fit_result(result_type: type, space: ParameterSpace, options: FitOptions, measurement: Measurement, prep: Prepared,
+               v, code: int, steps: int, v0, *, seconds, options_record, value=None, metrics=None, jtj=None):
+    """The ``result_type`` (FitResult) of one fit at ``v`` (the table's unit); metrics, J^T J and the loss
+    computed here where the solve did not give them in that unit."""
     m, loss = space.model, options.loss
     params = {k: a.copy() for k, a in m.unflatten(np.asarray(v, dtype=np.float64)).items()}
     if metrics is None or jtj is None:
@@ -380,7 +382,7 @@ def fit_result(space: ParameterSpace, options: FitOptions, measurement: Measurem
     status = STATUS_TEXT[code]
     if options.solver == "scipy" and code == 0:
         status = "converged (scipy least_squares)"
-    return FitResult(
+    return result_type(
         model=m, params=params, loss=loss, loss_value=float(value), metrics=metrics, steps=int(steps),
         converged=code == 0, status=status, status_code=int(code), seconds=dict(seconds), solver=options.solver,
         data_name=measurement.name, n_used=prep.n_used, n_excluded=prep.n_excluded, excluded=prep.excluded,
@@ -388,7 +390,7 @@ def fit_result(space: ParameterSpace, options: FitOptions, measurement: Measurem
         options=dict(options_record), at_bound=at_bound, warnings=tuple(warnings))
 
 
-def with_warning(result: FitResult, sentence: str | None) -> FitResult:
+def with_warning(result, sentence: str | None):
     """``result`` with one more warning (None: as it is)."""
     return result if sentence is None else dataclasses.replace(result, warnings=(*result.warnings, sentence))
 

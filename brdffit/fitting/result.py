@@ -3,11 +3,11 @@
 A FitResult is data: its fields, its JSON (``to_json`` / ``from_json``) and ``eval`` (the fitted
 model's f_r). What other layers do with a fit are their functions: :func:`brdffit.materials.export`
 and :func:`brdffit.materials.convert` (material files, native models), :func:`brdffit.mitsuba_bsdf`
-(a Mitsuba BSDF), :mod:`brdffit.plot` (figures). Two thin doors stay on the class, each importing
-what it calls where the import checks see it: ``to_mitsuba`` (the renderer) and ``_repr_png_``
-(Jupyter's figure), which is why this module's layer stands above the renderers and the figures
-(``[tool.importlinter]`` in pyproject.toml). ``convert`` and ``export`` cannot be such doors: they
-run a fit, and the fit driver makes FitResults, so the import would close a circle.
+(a Mitsuba BSDF), :mod:`brdffit.plot` (figures). The class keeps thin doors to them (``export``,
+``convert``, ``to_mitsuba``, ``_repr_png_``), each importing what it calls where the import checks see
+it, which is why this module's layer stands above the material files, the renderers and the figures
+(``[tool.importlinter]`` in pyproject.toml). The fit driver, in the engine below them, makes
+FitResults without importing this class: its callers name the type (``result_type``).
 """
 
 from __future__ import annotations
@@ -180,6 +180,25 @@ class FitResult:
         from ..render.export import mitsuba_bsdf
 
         return mitsuba_bsdf(self)
+
+    def convert(self, model: str | Model, **options) -> "FitResult":
+        """This fit as ``model`` (a native model: ``mitsuba:roughplastic``, ``gltf:metallic_roughness``,
+        ...): ``model`` fitted to this fit's BRDF on the UBO-81 grid, the conversion error in
+        ``options["converted_from"]`` (SPEC 13; :func:`brdffit.materials.convert`)."""
+        from ..materials import convert
+
+        return convert(self, getattr(model, "name", model), **options)
+
+    def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
+               force: bool = False) -> "FitResult":
+        """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
+        ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13;
+        :func:`brdffit.materials.export`). With ``to``, the fit is converted first; returns the fit
+        written. ``bsdf_id`` is held to the CLI's ``--id`` rule (letters, digits, '_', not starting with
+        a digit; else UsageError); default: the file's name made so."""
+        from ..materials import export
+
+        return export(self, path, to=None if to is None else getattr(to, "name", to), bsdf_id=bsdf_id, force=force)
 
     # -- JSON -------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

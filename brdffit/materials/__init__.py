@@ -44,8 +44,9 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     the source model and the conversion error: ``rel_rmse`` and ``log_rmse`` of the converted BRDF
     against the source fit's on that grid (SPEC 5's definitions)."""
     from .. import models
-    from ..fitting.api import fit as run_fit
     from .._fit_defaults import LOSSES
+    from ..fitting.driver import fit_measurements
+    from ..fitting.options import FitOptions
     from ..grid import ubo_pairs
     from ..measurement import Measurement
 
@@ -61,7 +62,13 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     table = Measurement(wi, wo, values, name=source, source=f"brdffit fit of {fit.model.name}", grid="ubo81")
     if loss is None:
         loss = fit.loss if fit.loss in LOSSES else "log"
-    converted = run_fit(table, target, loss=loss, **fit_options)
+    # The fit driver itself (the engine below this layer, like ``brdffit.fit``), making a result of
+    # the source fit's own type: FitResult's ``convert`` and ``export`` call this module.
+    try:
+        options = FitOptions(loss=loss, **fit_options)
+    except TypeError as exc:
+        raise UsageError(f"convert: {' '.join(str(exc).split())}") from None
+    converted, = fit_measurements([table], target, options, result_type=type(fit))
     metrics = dict(converted.metrics)
     if not np.sum(values**2) > 1e-300:  # the fitting's floor of a relative metric's denominator
         # a source fit that is zero everywhere: an error relative to it is not a number (it was 1e150)
