@@ -1,4 +1,4 @@
-"""Throughput of ``brdffit.fit_btf`` (SPEC 7, "At scale") against a loop of ``brdffit.fit``, in one run.
+"""Throughput of ``brdffit.fit_btf`` (docs/btf.md#at-scale) against a loop of ``brdffit.fit``, in one run.
 
 A generated BTF of ``--model`` (default ``ggx``, ``--size`` x ``--size`` texels, smooth parameter maps,
 1 % noise) is fitted with ``fit_btf`` twice: the first run as a user sees it (compiling included, or

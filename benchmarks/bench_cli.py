@@ -1,5 +1,5 @@
 """Benchmark: wall time of ``brdffit fit data/sample_ubo81.exr --model ggx -o DIR`` in a new process
-(issue 8: a second process, the compile cache filled by a first one, within 2.5 s on a quiet machine).
+(docs/fitting.md#solvers: a second process, the compile cache filled by a first one, within 2.5 s on a quiet machine).
 
 Prints the first process (empty compile cache, ``BRDFFIT_CACHE`` in a temporary folder), the median
 and minimum of ``--repeat`` second processes (wall, and CPU = user + system of the child, which a

@@ -1,4 +1,4 @@
-"""What a Dask cluster costs against a local run of ``brdffit.fit_btf`` (SPEC 7 "At scale").
+"""What a Dask cluster costs against a local run of ``brdffit.fit_btf`` (docs/btf.md#at-scale).
 
 A generated BTF (default 32 x 32 ``ggx`` texels in 16 tiles of 8 x 8, 1% noise) is fitted in the
 same run: locally (``fit_btf(btf, model)``, twice: the first includes compiling in this process,

@@ -1,7 +1,7 @@
 """Cycles (through the Blender worker) against Mitsuba: the fit renders of one sphere validation, and
 what one gonioreflectometer sample costs.
 
-1. A blender:principled fit rendered on the validation sphere (SPEC 6 framing, the 5 default
+1. A blender:principled fit rendered on the validation sphere (docs/validation.md#validation-rendering framing, the 5 default
    lights) by ``brdffit.render_sphere(..., renderer=...)``: Mitsuba (the brdffit plugin: the JAX
    formula, this model through the evaluated callback, since its table gather has no Dr.Jit
    translation) and Cycles (Blender's own Principled BSDF in the worker, one request per light).

@@ -7,7 +7,7 @@ over ``--changes`` random changes per model, where the time goes (evaluation, me
 two baselines measured in the same run: the model alone on the 81x81 table through the evaluator
 (the floor), and the static figures a notebook redraws for the same view (``brdffit.plot``'s
 compare_table and slices, to PNG). Then a change of light, and Fit against ``brdffit.fit`` from the
-same start. The target (SPEC 14): a parameter change in at most 100 ms median on 2 cores.
+same start. The target (docs/explorer.md#the-explorer): a parameter change in at most 100 ms median on 2 cores.
 
     .venv/bin/python benchmarks/bench_explore.py [--changes 40] [--models ggx lambert+ggx+ggx]
 """

@@ -3,7 +3,7 @@
 On every shared material (../shared/data or $BRDFFIT_DATA: RGL files on UBO-81, Cornell files as
 their scattered samples), model ``ggx``, loss ``log``, three fits of the same data:
 
-- hand-written: a NumPy ``ggx`` residual written from the SPEC formula, the ``log`` loss,
+- hand-written: a NumPy ``ggx`` residual written from the formula of docs/models.md#models, the ``log`` loss,
   ``scipy.optimize.least_squares(method="trf", jac="2-point")``, bounds kd [0, 1], ks >= 0
   (no upper bound), alpha [1e-3, 1], f0 [0, 1], start kd 0.2, ks 0.5, alpha 0.3, f0 0.05;
 - jitted scipy: ``brdffit.fit(m, "ggx", solver="scipy", init=<the same start>)`` (brdffit's
@@ -59,7 +59,7 @@ def data_files() -> list[Path]:
 
 # -- the hand-written fit -----------------------------------------------------------------------
 def numpy_ggx(v, wi, wo):
-    """SPEC 4 ggx: kd/pi + ks F G D / (4 cos_i cos_o), v = kd(3), ks(3), alpha, f0."""
+    """docs/models.md#models ggx: kd/pi + ks F G D / (4 cos_i cos_o), v = kd(3), ks(3), alpha, f0."""
     kd, ks, alpha, f0 = v[0:3], v[3:6], v[6], v[7]
     h = wi + wo
     h = h / np.linalg.norm(h, axis=1, keepdims=True)

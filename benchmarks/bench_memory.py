@@ -1,4 +1,4 @@
-"""Peak memory of ``fit_btf`` (SPEC 7, "At scale": one 96 x 96 tile in at most 2 GB, a 400 x 400 BTF in
+"""Peak memory of ``fit_btf`` (docs/btf.md#at-scale: one 96 x 96 tile in at most 2 GB, a 400 x 400 BTF in
 at most 3 GB), each measured in a child process of its own (the peak resident memory the kernel counted, the
 JAX runtime and the compiled programs included).
 

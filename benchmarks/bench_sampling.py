@@ -4,7 +4,7 @@ A glossy ``ggx`` fit (kd = 0, ks = 1, f0 = 1: exactly ``roughconductor`` with ``
 on a sphere over a diffuse floor, lit by a rectangular area light and a dim sky, path traced
 (``max_depth`` 4) at equal samples per pixel. Noise = RMSE against a high-spp reference
 (``roughconductor``, the same BRDF). Printed: the RMSE of ``roughconductor``, of the brdffit BSDF
-with its lobe mixture, and of the brdffit BSDF with cosine sampling only (before issue 10), and
+with its lobe mixture, and of the brdffit BSDF with cosine sampling only (before docs/DESIGN.md#where-users-meet-brdffit), and
 the ratios to ``roughconductor`` within this run.
 
     PYTHONPATH=. python benchmarks/bench_sampling.py [--size 96] [--spp 16] [--ref-spp 1024] [--alpha 0.1]

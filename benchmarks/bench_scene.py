@@ -1,4 +1,4 @@
-"""Benchmark: scene-aware fitting (issue 12, SPEC 12).
+"""Benchmark: scene-aware fitting (docs/scene.md#scene-aware-fitting).
 
 1. Time of ``brdffit.scene_usage`` on scenes/grazing_floor.xml (96x64 px, 16 spp, path tracing
    depth 2), first call in the process (LLVM kernels compiled) and warm (median of 3).

@@ -69,7 +69,7 @@ def __getattr__(name: str):
 
 def _register_mitsuba_plugin() -> None:
     # A user who set a Mitsuba variant before `import brdffit` can load scenes with
-    # <bsdf type="brdffit"> right away (SPEC 8); otherwise brdffit.register_mitsuba() does it.
+    # <bsdf type="brdffit"> right away (docs/materials.md#a-fit-in-any-mitsuba-scene); otherwise brdffit.register_mitsuba() does it.
     import sys
 
     if "mitsuba" in sys.modules:

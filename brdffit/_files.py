@@ -1,4 +1,4 @@
-"""Results are written atomically, and nothing is lost silently (SPEC 10).
+"""Results are written atomically, and nothing is lost silently (docs/cli.md#the-command-line-and-set-up).
 
 - A result (file or folder) is built under a hidden name beside its target and appears complete
   or not at all; an existing result is replaced only when asked (``force``), and the replacement

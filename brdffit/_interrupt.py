@@ -1,4 +1,4 @@
-"""The ``brdffit`` executable's Ctrl-C (SPEC 10): one line, exit 130, nothing left, at any moment.
+"""The ``brdffit`` executable's Ctrl-C (docs/cli.md#the-command-line-and-set-up): one line, exit 130, nothing left, at any moment.
 
 :func:`end_process_on_interrupt` is installed by the package's first line when the process is the
 ``brdffit`` executable (:func:`is_the_executable`), before the package imports anything else, so

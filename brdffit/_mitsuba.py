@@ -174,7 +174,7 @@ def eval_bsdf(bsdf, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) 
 
     This is how a ``measured`` RGL file is read (:mod:`brdffit.io.rgl`) and how a reference is
     evaluated outside a render (the 81x81 table panel, the closed-form agreement test), in the
-    order Mitsuba renders it (SPEC 3).
+    order Mitsuba renders it (docs/formats.md#readers-and-writers).
     """
     mi = mitsuba()
     wi = np.asarray(wi, np.float64).reshape(-1, 3)

@@ -1,4 +1,4 @@
-"""``brdffit demo``: the pipeline on the bundled sample measurement (SPEC 7).
+"""``brdffit demo``: the pipeline on the bundled sample measurement (docs/cli.md#the-command-line-and-set-up).
 
 Load the sample (``data/sample_ubo81.exr``, or a fresh generation when the package is installed
 without the repository's ``data/``), show what it holds, convert it to NPZ, plot the 81 x 81

@@ -1,6 +1,6 @@
 """Errors that users see.
 
-Bad input is reported as one line naming the file and the problem (SPEC 7): raise
+Bad input is reported as one line naming the file and the problem (docs/cli.md#bad-input): raise
 ``InputError(path, problem)`` anywhere; the CLI prints ``str(error)`` and exits with status 2.
 """
 

@@ -1,4 +1,4 @@
-"""Direction conventions (SPEC 1) and the UBO-81 sampling of the Bonn / UTIA BTF databases.
+"""Direction conventions (docs/conventions.md#conventions) and the UBO-81 sampling of the Bonn / UTIA BTF databases.
 
 Local frame: z is the normal, x the tangent at phi = 0, right-handed. theta is the polar angle
 from z, phi the azimuth from x, counter-clockwise seen from above. Arrays hold radians.

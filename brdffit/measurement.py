@@ -1,6 +1,6 @@
-"""`Measurement`: the one in-memory form of every reflectance source (SPEC 2).
+"""`Measurement`: the one in-memory form of every reflectance source (docs/formats.md#measurement).
 
-Samples are (wi, wo) pairs in the local shading frame (SPEC 1) with a BRDF value per channel,
+Samples are (wi, wo) pairs in the local shading frame (docs/conventions.md#conventions) with a BRDF value per channel,
 in 1/sr, without the cosine foreshortening. ``weights`` 0 marks an invalid sample (kept so that
 a UBO table keeps its 81 x 81 shape).
 """
@@ -28,8 +28,8 @@ def _as_float_array(x) -> Array:
 
 
 def _unit_rows(w) -> Array:
-    """Directions as unit vectors (SPEC 1): a row whose length is off 1 by more than 1e-6 (float32 round-off is 6e-8) is
-    normalised (issue 28: non-unit directions went into the formulas as they were and biased the
+    """Directions as unit vectors (docs/conventions.md#conventions): a row whose length is off 1 by more than 1e-6 (float32 round-off is 6e-8) is
+    normalised (docs/fitting.md#hostile-but-valid-data: non-unit directions went into the formulas as they were and biased the
     fit, alpha 0.105 for 0.2). Rows of length 0 or not finite are kept: they are invalid samples,
     and a fit leaves them out where they lie below the horizon or carry weight 0."""
     if np.iscomplexobj(w):

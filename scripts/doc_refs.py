@@ -1,6 +1,6 @@
 """The code's citations of its design, listed and checked against the headings of docs/.
 
-    .venv/bin/python scripts/doc_refs.py [--summary] [PATH ...]      (default PATHs: brdffit tests)
+    .venv/bin/python scripts/doc_refs.py [--summary] [PATH ...]      (default: brdffit tests benchmarks scripts notebooks)
 
 Every citation in the files under PATH is printed as ``file:line: kind "text" -> target: verdict``:
 
@@ -66,7 +66,9 @@ ISSUES = {
 }
 
 #: Files whose citations are examples of the forms, not citations (this script's test).
-EXAMPLES = ("tests/test_doc_refs.py",)
+EXAMPLES = ("tests/test_doc_refs.py", "scripts/doc_refs.py")
+#: Where the code is: every citation under these resolves (tests/test_doc_refs.py).
+CODE = ("brdffit", "tests", "benchmarks", "scripts", "notebooks")
 
 _DOCS_REF = re.compile(r"docs/(?P<page>[\w./-]+?\.md)(?:#(?P<anchor>[\w-]+))?")
 _SPEC_REF = re.compile(r"\bSPEC(?: sections?)? (?P<numbers>\d+(?:(?:, | and |, and )\d+)*)"
@@ -143,7 +145,7 @@ def files(paths):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("paths", nargs="*", default=[str(REPO / "brdffit"), str(REPO / "tests")])
+    parser.add_argument("paths", nargs="*", default=[str(REPO / p) for p in CODE])
     parser.add_argument("--summary", action="store_true", help="only the counts")
     args = parser.parse_args(argv)
     counts: Counter = Counter()

@@ -1,4 +1,4 @@
-"""Issue 13's hand mutations: each deliberate bug of the mutation trial, applied alone to a copy of
+"""docs/DESIGN.md#tests-that-fail-when-the-code-is-wrong's hand mutations: each deliberate bug of the mutation trial, applied alone to a copy of
 the tree, must make at least one of the named test files fail, without the shared data.
 
 mutmut mutates models/, fitting/ and io/ only; these bugs also sit in the CLI, the file writer, the

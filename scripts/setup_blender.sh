@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Creates .venv-blender: Blender as a Python module (bpy), in an environment of its own (SPEC 13).
+# Creates .venv-blender: Blender as a Python module (bpy), in an environment of its own (docs/materials.md#native-materials-and-exports).
 # bpy 5.0.1 (the newest for CPython 3.11) needs numpy < 2, jax needs numpy >= 2, and with numpy 2
 # bpy's own glTF importer/exporter fail to import, so bpy cannot share .venv. brdffit drives it in
 # a worker process run by this interpreter (brdffit/cycles/). Called by `make test` (not by

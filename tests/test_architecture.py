@@ -1,4 +1,4 @@
-"""brdffit's shape (issue 29): the layers contract of pyproject.toml ([tool.importlinter]) holds,
+"""brdffit's shape (docs/DESIGN.md#layers): the layers contract of pyproject.toml ([tool.importlinter]) holds,
 every module stands in a layer, no modules import each other in a circle (imports inside
 functions count), and no module is over 450 lines."""
 

@@ -1,4 +1,4 @@
-"""Exit statuses and leftovers of the Blender worker's paths (SPEC 10, 13): a worker that dies is exit
+"""Exit statuses and leftovers of the Blender worker's paths (docs/cli.md#the-command-line-and-set-up and docs/materials.md#native-materials-and-exports): a worker that dies is exit
 2 with one line (not 3, which README reserves for bugs); a worker that answers "ready" then hangs is
 stopped within the request's budget; Ctrl-C during a ``.blend`` export leaves nothing in TMPDIR.
 

@@ -1,4 +1,4 @@
-"""blender:principled equals Blender 5's Cycles (SPEC 13: within 2 %), measured as a gonioreflectometer:
+"""blender:principled equals Blender 5's Cycles (docs/materials.md#native-materials-and-exports: within 2 %), measured as a gonioreflectometer:
 a large plane with the exported material, a sun of angle 0 towards wi, an orthographic camera from
 wo, direct light only; the pixel is f (n.wi) E. Broken copies of the formula fail the same check."""
 
@@ -16,7 +16,7 @@ from brdffit.models import _cycles_math as cy
 from brdffit.models import blender_principled as bp
 
 MODEL = models.get("blender:principled")
-TOLERANCE = 0.02  # SPEC 13
+TOLERANCE = 0.02  # docs/materials.md#native-materials-and-exports
 
 
 def random_pairs(rng, n, max_deg=85.0):

@@ -1,5 +1,5 @@
 """Importance sampling of the brdffit BSDF: Mitsuba's own chi-square test of sample() against pdf()
-for every model at several roughnesses, and sample weights equal to eval / pdf (issue 10)."""
+for every model at several roughnesses, and sample weights equal to eval / pdf (docs/DESIGN.md#where-users-meet-brdffit)."""
 
 from __future__ import annotations
 

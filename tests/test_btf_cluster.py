@@ -1,4 +1,4 @@
-"""fit_btf on a Dask cluster (SPEC 7 "At scale"): a LocalCluster of two worker processes on this
+"""fit_btf on a Dask cluster (docs/btf.md#at-scale): a LocalCluster of two worker processes on this
 machine, started once for the module. The maps equal a local run's bit for bit, a killed worker's
 tile runs again and the run completes, an interrupted run resumes (with Dask or without), a
 worker that cannot read the BTF fails the run with one line naming it, and the CLI's --scheduler."""

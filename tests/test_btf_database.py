@@ -1,4 +1,4 @@
-"""A database in one command (SPEC 7 "At scale", 10): ``brdffit fit-btf DIR`` where DIR holds several
+"""A database in one command (docs/btf.md#at-scale, 10): ``brdffit fit-btf DIR`` where DIR holds several
 BTFs (folders and zips) fits each into OUT/<name>/, with one progress bar over all texels, a summary
 table (printed, CSV and JSON), resuming across materials (an interrupt, Ctrl-C included, keeps the
 finished materials), and bad input named in one line before any work."""

@@ -1,4 +1,4 @@
-"""Per-texel fitting and validation of BTFs (SPEC 7): known truth, measured mosaic, resuming,
+"""Per-texel fitting and validation of BTFs (docs/btf.md#btfs-per-texel-fitting): known truth, measured mosaic, resuming,
 two processes under jax.distributed, validate_btf against the photographs, the CLI."""
 
 from __future__ import annotations

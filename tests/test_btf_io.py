@@ -1,4 +1,4 @@
-"""BTF reading (SPEC 7): folders and zip archives, space-separated names, JPEG / Radiance HDR,
+"""BTF reading (docs/btf.md#btfs-per-texel-fitting): folders and zip archives, space-separated names, JPEG / Radiance HDR,
 region / step / includes_cos / scale, the tile-major cache. (The RGBE reader and writer themselves:
 test_io_hdr.py.)"""
 

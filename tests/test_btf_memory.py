@@ -1,4 +1,4 @@
-"""Memory is bounded by the tile, not the BTF (SPEC 7, "At scale"): one 96 x 96 tile (9,216 texels, 725 MB
+"""Memory is bounded by the tile, not the BTF (docs/btf.md#at-scale): one 96 x 96 tile (9,216 texels, 725 MB
 of float32 values) is fitted in at most 2 GB, measured as the peak resident memory of a child process of its
 own (the JAX runtime and compiled programs included). Before, a tile's texels each held their own copy of
 the shared directions in float64 and every pass copied rows: 96 x 96 passed 3 GB."""

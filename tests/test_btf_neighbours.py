@@ -1,4 +1,4 @@
-"""fit_btf's neighbour starts (issue 11): the order of the passes over a tile, and that a texel
+"""fit_btf's neighbour starts (docs/btf.md#neighbour-starts): the order of the passes over a tile, and that a texel
 started from its neighbour's result ends where a start from the grid ends."""
 
 from __future__ import annotations

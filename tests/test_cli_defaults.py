@@ -1,4 +1,4 @@
-"""One source for names and defaults (issue 29): the CLI's help states the defaults the code uses
+"""One source for names and defaults (docs/DESIGN.md#layers): the CLI's help states the defaults the code uses
 (read here from the functions the commands call, not from the help's own source), and the relative
 RMSE is ``rel_rmse`` in every output; a fit file that calls it ``relative_rmse`` is read as that."""
 

@@ -1,4 +1,4 @@
-"""CLI `info`, `convert` and `demo` (SPEC 7)."""
+"""CLI `info`, `convert` and `demo` (docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 

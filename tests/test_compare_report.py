@@ -1,5 +1,5 @@
 """brdffit.compare's Report without fitting: the JSON file, the Jupyter table's ranking, and the
-Pareto front's ties (SPEC 5: "Rows whose errors tie within rtol keep only the fastest")."""
+Pareto front's ties (docs/fitting.md#fitting: "Rows whose errors tie within rtol keep only the fastest")."""
 
 from __future__ import annotations
 

@@ -96,7 +96,7 @@ def test_gonio_lambert_equals_the_hand_value(blender):
 
 
 def test_sphere_framing_lambert_equals_the_closed_form(blender):
-    """SPEC 6: pixel (i, j) centre at x = 2(j+0.5)/size - 1, y = 1 - 2(i+0.5)/size; a Lambertian
+    """docs/validation.md#validation-rendering: pixel (i, j) centre at x = 2(j+0.5)/size - 1, y = 1 - 2(i+0.5)/size; a Lambertian
     sphere renders rho/pi max(n.l, 0) E with n = (x, y, sqrt(1 - x^2 - y^2))."""
     size = 48
     light = np.array([0.6, 0.3, 0.74])

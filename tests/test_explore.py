@@ -41,7 +41,7 @@ def rgb(png: bytes) -> np.ndarray:
 
 def by_hand(m, model: str, params: dict):
     """(log loss, rel_rmse, f (6561, C)) of ``model`` at ``params`` on the sample, in NumPy: the
-    model's own JAX formula, the SPEC 5 definitions written out (every sample weighs 1)."""
+    model's own JAX formula, the docs/fitting.md#fitting definitions written out (every sample weighs 1)."""
     f = np.asarray(brdffit.models.get(model).eval(params, np.asarray(m.wi), np.asarray(m.wo)))
     ref = np.asarray(m.values, np.float64)
     used = m.valid_mask()
@@ -189,7 +189,7 @@ def test_exposure_brightens_the_spheres_by_stops(explorer):
 
 
 def test_the_sphere_preview_is_the_validation_sphere_at_the_pixel_centres(explorer):
-    """Against the SPEC 6 shading written out here (tests/test_render_sphere.py's closed form at the
+    """Against the docs/validation.md#validation-rendering shading written out here (tests/test_render_sphere.py's closed form at the
     pixel centres): frame s = (z, 0, -x)/|.|, t = n x s, radiance f_r (n . l); an anisotropic
     model, so that a wrong tangent shows."""
     explorer.model = "ward"

@@ -1,4 +1,4 @@
-"""What brdffit says about a fit and an export is what it is (SPEC 5, 13): a bound warning names each
+"""What brdffit says about a fit and an export is what it is (docs/fitting.md#fitting and docs/materials.md#native-materials-and-exports): a bound warning names each
 side where it applies, the line after an export names what the file holds, a converted file's
 metrics are named as the error against the source fit, and a conversion from a fit that is zero
 everywhere has no relative error (it printed rel_rmse 1e150)."""

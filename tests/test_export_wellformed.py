@@ -1,4 +1,4 @@
-"""Material files are valid for their format whatever the names and ids (SPEC 10, 13), through the
+"""Material files are valid for their format whatever the names and ids (docs/cli.md#the-command-line-and-set-up and docs/materials.md#native-materials-and-exports), through the
 CLI and the Python API alike: XML that a strict parser (expat) reads, strict JSON (no bare NaN), the
 user's id checked by one rule, a name taken from data made safe."""
 

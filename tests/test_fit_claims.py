@@ -1,4 +1,4 @@
-"""A fit never claims more than it reached (SPEC 5): one pipeline for one fit and a batch, a lobe the data
+"""A fit never claims more than it reached (docs/fitting.md#fitting): one pipeline for one fit and a batch, a lobe the data
 do not see tried again on every path, the loss minimised is the loss reported whatever the table's unit,
 ``converged`` only at an optimum the model could reach, and a given start far above the default's marked."""
 

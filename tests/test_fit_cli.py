@@ -1,4 +1,4 @@
-"""CLI `brdffit fit` / `brdffit compare`: outputs, exit codes (SPEC 7). Small NPZ inputs."""
+"""CLI `brdffit fit` / `brdffit compare`: outputs, exit codes (docs/cli.md#the-command-line-and-set-up). Small NPZ inputs."""
 
 from __future__ import annotations
 

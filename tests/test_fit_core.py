@@ -387,7 +387,7 @@ class _FixedScene:
 
 
 def test_a_scene_multiplies_the_given_weights():
-    """SPEC 12: the samples are weighted by where the scene looks, times ``weights``. A Lambert
+    """docs/scene.md#scene-aware-fitting: the samples are weighted by where the scene looks, times ``weights``. A Lambert
     fit to Blinn-Phong data depends on the weights, so each combination is told apart."""
     m = _measurement({"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "n": [30.0]}, model="blinn_phong", n=300)
     rng = np.random.default_rng(5)

@@ -1,4 +1,4 @@
-"""The fit driver (issue 29): ``fit``, ``fit_batch`` and ``fit_btf`` check their options in one
+"""The fit driver (docs/DESIGN.md#layers): ``fit``, ``fit_batch`` and ``fit_btf`` check their options in one
 place (``FitOptions``) and report each fit's status as a code beside its text."""
 
 from __future__ import annotations

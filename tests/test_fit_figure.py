@@ -1,5 +1,5 @@
 """The figure ``brdffit fit`` writes (fit.png) and what reading and plotting a fit compile in a new
-process (issue 8: a second ``brdffit fit`` process within 2.5 s).
+process (docs/fitting.md#solvers: a second ``brdffit fit`` process within 2.5 s).
 
 Pinned values come from the test's own inputs (the parameters it builds the fit from, the figure
 size in inches), never from the code under test.

@@ -57,7 +57,7 @@ RANGES: dict[str, dict[str, tuple]] = {
     "ggx": {"kd": ALB, "ks": (0.3, 1.0), "alpha": ROUGH, "f0": (0.05, 0.6)},
     "lafortune": {"kd": ALB, "rho": (0.5, 5.0), "cx": (-1.0, -0.6), "cz": (0.6, 1.0), "n": (5.0, 60.0, LOG)},
     "ashikhmin_shirley": {"rd": ALB, "rs": (0.05, 0.5), "nu": (5.0, 100.0, LOG), "nv": (5.0, 100.0, LOG)},
-    # native models (SPEC 13): the renderer's parameters
+    # native models (docs/materials.md#native-materials-and-exports): the renderer's parameters
     "mitsuba:roughconductor": {"alpha": ROUGH, "eta": (0.2, 2.0), "k": (1.0, 5.0)},
     "mitsuba:roughplastic": {"diffuse_reflectance": ALB, "alpha": ROUGH, "int_ior": (1.3, 2.0),
                              "specular_reflectance": (0.5, 1.0)},
@@ -70,7 +70,7 @@ RANGES: dict[str, dict[str, tuple]] = {
 }
 
 #: (model, set) -> why the current solver fails it; strict, so a listed case that passes fails the run.
-#: (The bounded LM of issue 8 recovers phong_classic-1 and torrance_sparrow-1/-3, which the old
+#: (The bounded LM of docs/fitting.md#solvers recovers phong_classic-1 and torrance_sparrow-1/-3, which the old
 #: active-set solver lost to local minima.)
 KNOWN_FAILURES: dict[tuple[str, int], str] = {
     # Not a solver failure since the structured solver: the fit reaches the minimum of this noise
@@ -80,7 +80,7 @@ KNOWN_FAILURES: dict[tuple[str, int], str] = {
     # As lafortune 2: a fit started at the truth ends at the default fit's loss (1.5554808e-6), with
     # clearcoat 0.547 for 0.502, so the glossy peak there is 2.7 % above the truth's.
     ("mitsuba:principled", 1): "the noise draw's minimum lies 2.7 % from the truth in the glossy peak (a fit from the truth ends there too)",
-    # A solver-start gap, left open (issue 27's closing note): the default start's grid gives eta and
+    # A solver-start gap, left open (docs/materials.md#native-materials-and-exports's closing note): the default start's grid gives eta and
     # k three shared values each, and these fits converge in another (eta, k) valley of a channel
     # (k = 0 there) whose Fresnel curve matches at the grid's angles only: rel_rmse 0.099 and 0.043.
     ("mitsuba:roughconductor", 0): "default start: converged in another (eta, k) valley (rel_rmse 0.099)",

@@ -1,7 +1,7 @@
 """FitResult as a document and as text, without fitting: every field of fit.json read back, the
 defaults of a minimal file (model and params only, as hand-written or older files have), the
 Jupyter HTML and the repr (what a notebook user reads), and every refusal of a malformed file
-with its message (SPEC 10: one line naming the problem)."""
+with its message (docs/cli.md#the-command-line-and-set-up: one line naming the problem)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Hand-edited fit.json files (SPEC 10): every field FitResult reads is checked, so a hostile file is
+"""Hand-edited fit.json files (docs/cli.md#the-command-line-and-set-up): every field FitResult reads is checked, so a hostile file is
 one line naming it and exit 2 (never an internal error, exit 3), and a file cannot widen what is
 accepted: parameters outside the model's own bounds are refused whatever bounds it records. A
 generated corpus of hostile variants (types, NaN/inf, huge arrays, wrong channel counts, lone

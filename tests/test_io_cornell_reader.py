@@ -193,7 +193,7 @@ def test_any_phi_and_theta_up_to_the_tolerance_accepted(tmp_path):
 
 
 def test_provenance_written_into_the_metadata(tmp_path):
-    """What a saved table tells its reader about the conversion (SPEC: metadata travel with the data)."""
+    """What a saved table tells its reader about the conversion (docs/formats.md#measurement: metadata travel with the data)."""
     m = cornell.read(write(tmp_path / "p.brdf", [[0.3, 0.0, 0.3, np.pi, *np.ones(WL.size)]]))
     extra = dict(m.extra)
     assert extra["colour"] == "CIE 1931 2deg -> linear Rec.709, white-balanced: constant spectrum 1 -> RGB (1,1,1)"

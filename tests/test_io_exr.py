@@ -1,6 +1,6 @@
 """brdffit.io.exr.write checked from outside: the file is read back with the OpenEXR library itself
 (header keys and values, channel names, types and pixels), the ``brdffit.f64`` side copies are
-decoded by hand, and the expectations are literals (module docstring, SPEC 3) or NumPy arithmetic
+decoded by hand, and the expectations are literals (module docstring, docs/formats.md#readers-and-writers) or NumPy arithmetic
 on the input. No shared data needed."""
 
 from __future__ import annotations

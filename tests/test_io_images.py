@@ -229,7 +229,7 @@ def test_read_image_exr_channels(tmp_path, names):
 
 
 def test_metadata_in_full(tmp_path):
-    """What a folder's Measurement records of how it was read (SPEC's meta; ``brdffit info``)."""
+    """What a folder's Measurement records of how it was read (the meta of docs/formats.md#measurement; ``brdffit info``)."""
     table = codes(9)
     root = write_folder(tmp_path / "meta", "png", "flat", table)
     m = brdffit.load(root)

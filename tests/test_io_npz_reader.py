@@ -1,5 +1,5 @@
 """The .npz reader on small hand-made archives (np.savez, not brdffit's writer): what it accepts,
-how it normalises directions, and the exact one-line message of each refusal (SPEC 7: the message
+how it normalises directions, and the exact one-line message of each refusal (docs/cli.md#bad-input: the message
 names the file and the problem; the wording is part of what users see)."""
 
 from __future__ import annotations

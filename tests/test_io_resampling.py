@@ -158,7 +158,7 @@ def test_coincident_samples_are_averaged(offset_rad):
     with values f - 1 and f + 1 among samples of a linear f: the grid pairs at that point get their
     mean f, as a vertex of the interpolation (not f + 1, which an unmerged pair would give, nor a sum)."""
     m, _ = scattered(theta_light_max=70.0, n=400, seed=3)
-    k = ubo_index(30.0, 0.0) * 81 + ubo_index(45.0, 120.0)  # SPEC 1: light-major pairs
+    k = ubo_index(30.0, 0.0) * 81 + ubo_index(45.0, 120.0)  # docs/conventions.md#conventions: light-major pairs
     wi, wo = ubo_pairs()
     x = isotropic_coords(wi[k:k + 1], wo[k:k + 1])[0]
     f = (1 + x[0] + x[1] + x[2] / 4) * np.array([1.0, 2.0, 3.0])

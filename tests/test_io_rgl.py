@@ -1,4 +1,4 @@
-"""RGL .bsdf reader: equals a direct Mitsuba `measured` evaluation, in SPEC 3's light/view order."""
+"""RGL .bsdf reader: equals a direct Mitsuba `measured` evaluation, in docs/formats.md#readers-and-writers's light/view order."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def test_rgl_equals_mitsuba_on_ubo81(path):
 
 @pytest.mark.skipif(not RGL_FILES, reason="real measurements not found")
 def test_rgl_order_light_view_matters():
-    # The RGL data are not exactly reciprocal: the light/view order of SPEC 3 must be the one used.
+    # The RGL data are not exactly reciprocal: the light/view order of docs/formats.md#readers-and-writers must be the one used.
     path = next(p for p in RGL_FILES if "golden" in p.stem or "ibiza" in p.stem)
     m = brdffit.load(path)
     t = m.table()
@@ -282,7 +282,7 @@ def test_check_tensor_file_names_a_field_cut_short(tmp_path):
 
 
 def test_rgl_directions_at_the_horizon_get_weight_zero(tmp_path):
-    """SPEC: a sample with the light or the view at or below the horizon is not measured (weight 0,
+    """docs/conventions.md#conventions: a sample with the light or the view at or below the horizon is not measured (weight 0,
     value 0), also exactly at the horizon (z = 0)."""
     from tensor_file import isotropic_material
 

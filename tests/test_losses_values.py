@@ -1,5 +1,5 @@
 """Every loss of ``brdffit.fitting.losses`` against values written out with Python's ``math``
-(SPEC 5's table: l2, cosine_l2, log, cbrt, relative), sample by sample: the weights, the clamp of
+(docs/fitting.md#fitting's table: l2, cosine_l2, log, cbrt, relative), sample by sample: the weights, the clamp of
 ``log`` below -1, the cube root's smoothing width (1e-4 of the per-channel floor), the
 linearised row weights (dg/df at the reference, squared), and ``log_rmse`` over the used samples."""
 

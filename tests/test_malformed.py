@@ -1,5 +1,5 @@
 """Malformed inputs through the real CLI: exit 2, exactly one stderr line naming the file,
-no traceback, nothing written (SPEC 10). Hand-written cases with a reason each; the generated
+no traceback, nothing written (docs/cli.md#the-command-line-and-set-up). Hand-written cases with a reason each; the generated
 corpus of several hundred is tests/test_malformed_corpus.py."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A generated corpus of malformed inputs through the CLI (SPEC 10, issue 9), and hostile but valid ones (issue 28).
+"""A generated corpus of malformed inputs through the CLI (docs/cli.md#the-command-line-and-set-up, docs/cli.md#bad-input), and hostile but valid ones (docs/fitting.md#hostile-but-valid-data).
 
 Every reader (UBO image folder, EXR, NPZ, RGL tensor_file, Cornell, MERL, UTIA) and fit.json gets
 truncations at many offsets, byte flips in its header and its data, wrong sizes, wrong types,
@@ -361,7 +361,7 @@ def commands(case: Case, src: Path, out: Path, k: int, good_fit: Path) -> Iterat
 
 
 def check(code: int, out: str, err: str, named: Path, out_dir: Path) -> str | None:
-    """None when the run behaved as SPEC 10 says; else what went wrong."""
+    """None when the run behaved as docs/cli.md#the-command-line-and-set-up says; else what went wrong."""
     lines = err.strip("\n").split("\n") if err.strip() else []
     if code != 2:
         return f"exit {code}"

@@ -1,4 +1,4 @@
-"""The .blend export (SPEC 13) and Blender reading brdffit's files: a .blend made by Blender holds a
+"""The .blend export (docs/materials.md#native-materials-and-exports) and Blender reading brdffit's files: a .blend made by Blender holds a
 sphere with the fit's Principled BSDF, which renders like blender:principled (Cycles measured as a
 gonioreflectometer on the material taken from the file); a glTF export imports into Blender, through
 Blender's own glTF importer, with the fitted factors."""

@@ -1,5 +1,5 @@
-"""A fit as a material other programs load (SPEC 13): native Mitsuba XML that plain Mitsuba renders,
-glTF files checked by an independent reader, conversion with its error, and refusals (issue 27)."""
+"""A fit as a material other programs load (docs/materials.md#native-materials-and-exports): native Mitsuba XML that plain Mitsuba renders,
+glTF files checked by an independent reader, conversion with its error, and refusals (docs/materials.md#native-materials-and-exports)."""
 
 from __future__ import annotations
 
@@ -100,7 +100,7 @@ def test_native_xml_renders_in_plain_mitsuba_like_brdffit(tmp_path, model, param
     c = (np.arange(size) + 0.5) * (2.0 / size) - 1.0
     x, y = np.meshgrid(c, -c)
     inside = x * x + y * y < 0.9**2
-    for ch in range(3):  # mean within 2 % per channel (issue 27's "Done when")
+    for ch in range(3):  # mean within 2 % per channel (docs/materials.md#native-materials-and-exports's "Done when")
         assert plain[..., ch][inside].mean() == pytest.approx(ours[..., ch][inside].mean(), rel=0.02)
     assert plain[inside].mean() > 0.01  # not black
 
@@ -137,7 +137,7 @@ def accessor(doc, blob, index, dtype, width):
 
 def test_glb_holds_the_factors_on_an_outward_sphere(tmp_path):
     fit = a_fit("gltf:metallic_roughness", GLTF)
-    fit.export(tmp_path / "ball.glb")  # SPEC 13's FitResult.export: brdffit.materials.export
+    fit.export(tmp_path / "ball.glb")  # docs/materials.md#native-materials-and-exports's FitResult.export: brdffit.materials.export
     doc, blob = read_glb((tmp_path / "ball.glb").read_bytes())
     assert doc["asset"]["version"] == "2.0"
     (material,) = doc["materials"]
@@ -180,7 +180,7 @@ def test_convert_reports_its_error_against_the_source(source, params):
     from brdffit.grid import ubo_pairs
 
     fit = a_fit(source, params)
-    out = fit.convert("gltf:metallic_roughness")  # SPEC 13's FitResult.convert: brdffit.materials.convert
+    out = fit.convert("gltf:metallic_roughness")  # docs/materials.md#native-materials-and-exports's FitResult.convert: brdffit.materials.convert
     assert type(out) is FitResult and out.model.name == "gltf:metallic_roughness"
     c = out.options["converted_from"]
     assert c["model"] == source and c["grid"] == "ubo81"

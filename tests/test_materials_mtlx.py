@@ -1,4 +1,4 @@
-"""MaterialX export (SPEC 13): gltf_pbr for glTF fits, open_pbr_surface for Blender fits; the document
+"""MaterialX export (docs/materials.md#native-materials-and-exports): gltf_pbr for glTF fits, open_pbr_surface for Blender fits; the document
 validates against MaterialX's own standard libraries (MaterialX's validate()), and carries the values."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Fitted parameter maps as textured native materials (SPEC 7, 13): the Mitsuba XML loaded and rendered
+"""Fitted parameter maps as textured native materials (docs/btf.md#btfs-per-texel-fitting and docs/materials.md#native-materials-and-exports): the Mitsuba XML loaded and rendered
 by plain Mitsuba in a process that never imports brdffit, texel by texel against the model's own JAX
 formula; the glTF file checked by the Khronos validator and read back by hand (structure, textures,
 channel packing, texel layout); the .blend rendered by Cycles through the worker; bad input refused
@@ -277,7 +277,7 @@ def test_gltf_json_holds_the_same_asset(tmp_path):
 def test_blend_renders_each_texel_in_cycles(blender, tmp_path):
     """The .blend as a user opens it (its textures packed: the EXRs brdffit wrote are gone), rendered
     through its own camera (one pixel per texel, looking down) under a sun of angle 0: pixel = f (n.l) E
-    of its texel, image row 0 = texel row 0. SPEC 13 allows Cycles 2 %; measured 4e-5 here."""
+    of its texel, image row 0 = texel row 0. docs/materials.md#native-materials-and-exports allows Cycles 2 %; measured 4e-5 here."""
     maps = random_maps("blender:principled", seed=5)
     path = maps.export(tmp_path / "tile.blend", bsdf_id="tile")[0]
     (name, mat), = blender.inspect(path).items()

@@ -1,4 +1,4 @@
-"""`Measurement` (SPEC 2): immutable, a JAX pytree whose leaves are the four arrays and whose
+"""`Measurement` (docs/formats.md#measurement): immutable, a JAX pytree whose leaves are the four arrays and whose
 metadata is static, equal when its metadata and arrays are."""
 
 from __future__ import annotations

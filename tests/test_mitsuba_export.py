@@ -1,5 +1,5 @@
-"""A fit in a user's own Mitsuba scene (SPEC 8): ``to_mitsuba``, the ``brdffit`` plugin, ``brdffit
-export``, and the Dr.Jit lifecycle of the Python BSDF (issues 10, 12, 13)."""
+"""A fit in a user's own Mitsuba scene (docs/materials.md#a-fit-in-any-mitsuba-scene): ``to_mitsuba``, the ``brdffit`` plugin, ``brdffit
+export``, and the Dr.Jit lifecycle of the Python BSDF (docs/DESIGN.md#where-users-meet-brdffit, 12, 13)."""
 
 from __future__ import annotations
 
@@ -120,7 +120,7 @@ def test_export_cli_xml_loads_in_a_scene(tmp_path, capsys):
     assert not (tmp_path / "x.xml").exists()
 
 
-# -- Dr.Jit lifecycle (issue 12) ---------------------------------------------------------------------
+# -- Dr.Jit lifecycle (docs/scene.md#scene-aware-fitting) ---------------------------------------------------------------------
 
 def other_scene() -> dict:
     """A scene with Mitsuba's own BSDFs only: path tracer (symbolic loops and calls by default)."""
@@ -153,7 +153,7 @@ def test_other_scenes_render_in_either_order_while_a_brdffit_bsdf_lives():
     np.testing.assert_allclose(np.asarray(mi.render(mi.load_dict(other_scene()), spp=4)), before, rtol=1e-5, atol=1e-6)
 
 
-# -- teardown (issue 13) ------------------------------------------------------------------------------
+# -- teardown (docs/DESIGN.md#tests-that-fail-when-the-code-is-wrong) ------------------------------------------------------------------------------
 
 EXIT_SNIPPET = """
 import sys, time

@@ -94,7 +94,7 @@ s     1         [1e-4, 1] (log)  -         0.2      roughness  width
 
 
 # Ranges fixed by the papers' definitions, whatever the library's choices elsewhere: the
-# physical range (SPEC 5: applied with physical=True; the default bounds restrict only what the
+# physical range (docs/fitting.md#fitting: applied with physical=True; the default bounds restrict only what the
 # formula needs, so a measured albedo may exceed 1 by default).
 PINNED = [
     ("oren_nayar", "sigma", "upper", math.pi / 2),  # facet slope angle, radians: at most 90 degrees

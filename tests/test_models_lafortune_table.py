@@ -1,4 +1,4 @@
-"""The Lafortune parameter table as documented (module docstring / SPEC 4): per lobe rho, cx, cz, n
+"""The Lafortune parameter table as documented (module docstring / docs/models.md#models): per lobe rho, cx, cz, n
 with their bounds, physical ranges and one-line docs, suffixed 1..k for k lobes."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 3 item 3, property tests (hypothesis): every model is non-negative for any parameters in
+"""docs/models.md#how-models-are-tested item 3, property tests (hypothesis): every model is non-negative for any parameters in
 its box and any directions in the closed upper hemisphere; reciprocal models are reciprocal
 (``phong_classic`` is not, and is shown not to be); directional albedo at the defaults is <= 1
 for any view direction up to 89.9 degrees (``brdffit.albedo``), and albedo is accurate where it is

@@ -1,4 +1,4 @@
-"""Issue 3 'done when': every model equals an independent implementation.
+"""docs/models.md#how-models-are-tested 'done when': every model equals an independent implementation.
 
 * ``ggx`` (kd = 0, ks = 1, f0 = 1) equals Mitsuba 3's ``roughconductor`` (ggx, material none)
   eval / cos(theta) to 1e-5 relative on the UBO-81 pairs, for several alpha; ``lambert`` equals

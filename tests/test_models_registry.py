@@ -1,4 +1,4 @@
-"""Issue 3: the registry, SPEC 4 names, composition naming, declared linearity, solver transform."""
+"""docs/models.md#how-models-are-tested: the registry, docs/models.md#models names, composition naming, declared linearity, solver transform."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 
 from brdffit.models import get, names
 
-# SPEC 4, normative: name -> ((parameter, channels), ...)
-SPEC4 = {
+# docs/models.md#models, normative: name -> ((parameter, channels), ...)
+LIBRARY_MODELS = {
     "lambert": (("kd", 3),),
     "phong": (("kd", 3), ("ks", 3), ("n", 1)),
     "phong_classic": (("kd", 3), ("ks", 3), ("n", 1)),
@@ -24,8 +24,8 @@ SPEC4 = {
 }
 
 
-# SPEC 13: the native models (a renderer's or format's own BSDF); their parameters are the renderer's.
-SPEC13 = {
+# docs/materials.md#native-materials-and-exports: the native models (a renderer's or format's own BSDF); their parameters are the renderer's.
+NATIVE_MODELS = {
     "mitsuba:roughconductor": (("alpha", 1), ("eta", 3), ("k", 3)),
     "mitsuba:roughplastic": (("diffuse_reflectance", 3), ("alpha", 1), ("int_ior", 1), ("specular_reflectance", 3)),
     "mitsuba:principled": (("base_color", 3), ("roughness", 1), ("metallic", 1), ("specular", 1), ("anisotropic", 1),
@@ -37,22 +37,22 @@ SPEC13 = {
 
 
 def test_names_are_spec4():
-    assert names() == sorted([*SPEC4, *SPEC13])
+    assert names() == sorted([*LIBRARY_MODELS, *NATIVE_MODELS])
 
 
-@pytest.mark.parametrize("name", sorted(SPEC13))
+@pytest.mark.parametrize("name", sorted(NATIVE_MODELS))
 def test_native_parameter_table_is_spec13(name):
     model = get(name)
     assert model.name == name and model.is_native and model.target == name.split(":")[0]
-    assert tuple((p.name, p.channels) for p in model.params) == SPEC13[name]
+    assert tuple((p.name, p.channels) for p in model.params) == NATIVE_MODELS[name]
     assert model.citation and model.doc
 
 
-@pytest.mark.parametrize("name", sorted(SPEC4))
+@pytest.mark.parametrize("name", sorted(LIBRARY_MODELS))
 def test_parameter_table_is_spec4(name):
     model = get(name)
     assert model.name == name
-    assert tuple((p.name, p.channels) for p in model.params) == SPEC4[name]
+    assert tuple((p.name, p.channels) for p in model.params) == LIBRARY_MODELS[name]
     assert model.citation and model.doc
     assert model.reciprocal == (name != "phong_classic")
     for p in model.params:
@@ -142,7 +142,7 @@ def _affine_defect(model, base, names_, rng, wi, wo):
     return np.max(np.abs(got - pred)) / max(np.max(np.abs(got)), 1e-300)
 
 
-@pytest.mark.parametrize("name", sorted(SPEC4) + ["lambert+ggx+ggx", "lafortune3"])
+@pytest.mark.parametrize("name", sorted(LIBRARY_MODELS) + ["lambert+ggx+ggx", "lafortune3"])
 def test_linear_flags_are_exact_and_maximal(name):
     model = get(name)
     wi, wo = _pairs()
@@ -158,7 +158,7 @@ def test_linear_flags_are_exact_and_maximal(name):
             assert _affine_defect(model, base, lin + [p.name], rng, wi, wo) > 1e-6, p.name
 
 
-@pytest.mark.parametrize("name", sorted(SPEC4) + ["lambert+ggx+ggx"])
+@pytest.mark.parametrize("name", sorted(LIBRARY_MODELS) + ["lambert+ggx+ggx"])
 def test_solver_box_roundtrip_and_samples_in_bounds(name):
     """Samples lie in the bounds, and the stock solvers' map into the box (solver_optx.to_box) is exact
     on them with every model's bounds (infinite sides, log axes)."""

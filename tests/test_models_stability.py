@@ -1,4 +1,4 @@
-"""Issue 3 item 4: every model (and a composite) is finite and non-negative, with finite gradients
+"""docs/models.md#how-models-are-tested item 4: every model (and a composite) is finite and non-negative, with finite gradients
 with respect to its parameters and to both directions, at each parameter's lower bound, upper
 bound and default (and all-lower / all-upper corners), over extreme directions: normal incidence,
 89, 89.9 and 90 degrees (the horizon), wi == wo, mirror pairs and opposite grazing pairs; in

@@ -1,4 +1,4 @@
-"""``multistart=k`` (README, SPEC 5): k more grid starts are solved beside the best one and the
+"""``multistart=k`` (README, docs/fitting.md#fitting): k more grid starts are solved beside the best one and the
 lowest loss wins. Checked after one solver step, where starts have not converged to a common
 minimum yet: the result must be the best of the k + 1 one-step solves from the k + 1 best grid
 points, each run on its own with ``init=``."""

@@ -76,7 +76,7 @@ def test_the_rechecks_test_files_and_modules_exist(monkeypatch):
 
 
 def test_the_hand_mutations_apply_to_the_current_source(monkeypatch):
-    """``make mutation-by-hand`` (scripts/mutation_by_hand.py) applies issue 13's mutations by text:
+    """``make mutation-by-hand`` (scripts/mutation_by_hand.py) applies docs/DESIGN.md#tests-that-fail-when-the-code-is-wrong's mutations by text:
     a source edit that moves one of them must show here, not as a silent 'does not apply' there."""
     monkeypatch.syspath_prepend(str(REPO / "scripts"))
     from mutation_by_hand import MUTATIONS

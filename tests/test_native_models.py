@@ -1,4 +1,4 @@
-"""Native models equal their renderer (SPEC 13, issue 27): the ``mitsuba:*`` formulas against Mitsuba 3's
+"""Native models equal their renderer (docs/materials.md#native-materials-and-exports): the ``mitsuba:*`` formulas against Mitsuba 3's
 own ``bsdf.eval``, ``gltf:metallic_roughness`` against an independent implementation of the glTF 2.0
 spec's appendix B; deliberately broken copies are caught."""
 

@@ -1,4 +1,4 @@
-"""A ``mitsuba:roughconductor`` export keeps its fitted colour in Mitsuba's spectral variants (SPEC 13):
+"""A ``mitsuba:roughconductor`` export keeps its fitted colour in Mitsuba's spectral variants (docs/materials.md#native-materials-and-exports):
 its eta and k are spectra that Mitsuba's RGB variants integrate back to the fitted RGB values and whose
 Fresnel reflectance has the fitted colour per wavelength. Written as RGB they were upsampled channel by
 channel and clipped to [0, 1]: a purple gem rendered olive."""

@@ -1,6 +1,6 @@
 """The notebooks run in a real Jupyter kernel (nbclient, ipykernel, the inline backend): no cell
 fails, every plotting cell shows an image, and no brdffit call changes the kernel's matplotlib
-backend (issue 10, defects 2 and 7).
+backend (docs/DESIGN.md#where-users-meet-brdffit, defects 2 and 7).
 
 The kernel is this interpreter (tests/notebook_kernel.py writes a kernel spec for sys.executable
 into a temporary folder), so the test needs nothing registered on the machine.

@@ -1,4 +1,4 @@
-"""One evaluator of an analytic model outside a fit (issue 29): ``FitResult.eval``, the renderer's
+"""One evaluator of an analytic model outside a fit (docs/DESIGN.md#layers): ``FitResult.eval``, the renderer's
 callback BSDF and the sampler's lobe weights all run ``fitting.model_eval``'s compiled program, so
 what a fit reports and what a render shows cannot come from two code paths."""
 

@@ -1,4 +1,4 @@
-"""No lost results (SPEC 10): concurrent writers, kills at every point of a --force replacement,
+"""No lost results (docs/cli.md#the-command-line-and-set-up): concurrent writers, kills at every point of a --force replacement,
 Ctrl-C, and usage problems with the output found before the work."""
 
 from __future__ import annotations
@@ -189,7 +189,7 @@ def test_ctrl_c_exits_130_with_nothing_written(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("moment", [0.3, 0.7, 1.5, 3.0])
 def test_ctrl_c_at_a_fixed_moment_ends_at_once_with_nothing_written(tmp_path, moment):
-    """Issue 28: SIGINT at fixed moments of a ``brdffit fit`` (the full sweep is
+    """docs/fitting.md#hostile-but-valid-data: SIGINT at fixed moments of a ``brdffit fit`` (the full sweep is
     benchmarks/bench_interrupt.py). Before brdffit's handler is installed the signal ends the process
     itself (-2); after, brdffit ends it (130); never an abort, a crash or a hang (the old handler
     raised into whatever ran: -11 at 0.3 s in the sweep), and nothing is left in the folder."""

@@ -1,4 +1,4 @@
-"""Issue 8 item 1, SPEC 5 "Parameter space": default bounds only where the formula needs them,
+"""docs/fitting.md#solvers item 1, docs/fitting.md#parameter-space: default bounds only where the formula needs them,
 ``physical=True``, ``bounds=`` / ``fixed=`` (API and CLI), ordered lobes, ``at_bound`` and
 ``warnings``; every model file's doc table equals its parameter table."""
 
@@ -59,14 +59,14 @@ def test_doc_table_parser_sees_a_changed_bound():
 
 
 def test_default_bounds_only_where_the_formula_needs_them():
-    # SPEC 5: scales non-negative (no upper bound), roughness / exponents positive, f0 in [0, 1];
+    # docs/fitting.md#fitting: scales non-negative (no upper bound), roughness / exponents positive, f0 in [0, 1];
     # the physical range is finite and inside the bounds for every parameter.
     for name in models.names():
         for p in models.get(name).params:
             assert all(math.isfinite(v) for v in p.physical), (name, p.name)
             assert p.lower <= p.physical[0] <= p.default <= p.physical[1] <= p.upper
             if models.get(name).is_native:
-                # SPEC 13: a native model's bounds are the ranges its renderer accepts (finite:
+                # docs/materials.md#native-materials-and-exports: a native model's bounds are the ranges its renderer accepts (finite:
                 # Mitsuba refuses reflectances above 1), so every native fit exports as it is
                 assert math.isfinite(p.lower) and math.isfinite(p.upper), (name, p.name)
                 if p.linear:
@@ -107,7 +107,7 @@ def test_space_resolution_and_errors():
     s = ParameterSpace.build(m, bounds={"ggx2.alpha": (0.01, None)}, fixed={"ggx1.f0": 0.04}, physical=True)
     flat = dict(zip(m.param_names, np.cumsum([0] + [m.size(p) for p in m.params])))
     assert s.hi[flat["kd"]] == 1.0  # physical
-    # override; None keeps the bound in force (SPEC 5: bounds= overrides a bound): here the physical 1.0
+    # override; None keeps the bound in force (docs/fitting.md#fitting: bounds= overrides a bound): here the physical 1.0
     assert (s.lo[flat["ggx2.alpha"]], s.hi[flat["ggx2.alpha"]]) == (0.01, 1.0)
     assert not s.free[flat["ggx1.f0"]] and s.lo[flat["ggx1.f0"]] == s.hi[flat["ggx1.f0"]] == 0.04
     assert s.order == ()  # ggx1 and ggx2 are told apart by the user's constraints: no swapping

@@ -1,4 +1,4 @@
-"""brdffit.plot (SPEC 9) and the figure defects of issue 10 (item 9), without rendering.
+"""brdffit.plot (docs/validation.md#figures) and the figure defects of docs/DESIGN.md#where-users-meet-brdffit (item 9), without rendering.
 
 Values pinned here are computed by hand in the test (NumPy on the arrays given), never read back
 from the code under test.
@@ -84,7 +84,7 @@ def test_error_range_follows_the_data():
     _, _, f_fit = ggx_values({**GGX, "kd": [0.301, 0.25, 0.2]})
     cos = wi[:, 2:3]
     residual = np.log1p(f_fit * cos) - np.log1p(f_ref * cos)
-    expected = np.abs(residual).max()  # the whole range of the errors (issue 27: not a percentile)
+    expected = np.abs(residual).max()  # the whole range of the errors (docs/materials.md#native-materials-and-exports: not a percentile)
     errors = [im for im in images(fig) if im.get_array().ndim == 2]
     assert len(errors) == 3
     for im in errors:
@@ -95,7 +95,7 @@ def test_error_range_follows_the_data():
 
 def test_error_scale_reaches_the_largest_error():
     """A few errors far above the rest (a fit that misses a peak by x20) stay on the scale: the
-    colour bar runs to the largest error, logarithmic beyond the 99.5th percentile (issue 27: it
+    colour bar runs to the largest error, logarithmic beyond the 99.5th percentile (docs/materials.md#native-materials-and-exports: it
     stopped at +-0.25 while errors reached 20)."""
     import matplotlib.colors
 

@@ -1,4 +1,4 @@
-"""The ``brdffit`` plugin renders right in Mitsuba's default symbolic mode (SPEC 8): the fit's JAX
+"""The ``brdffit`` plugin renders right in Mitsuba's default symbolic mode (docs/materials.md#a-fit-in-any-mitsuba-scene): the fit's JAX
 formula translated to Dr.Jit, no ``evaluated_calls()`` needed, parameters (and parameter maps)
 traversable and differentiable by ``prb``. Before, such a render came out black without a word, and
 formulas reading a table, and maps, needed evaluated_calls()."""
@@ -40,7 +40,7 @@ def scene(bsdf, size=32, integrator="direct"):
 
 
 def closed_form(model, params, size):
-    """f_r(l, v) (n.l) at the pixel centres of the sphere (SPEC 6 framing), NumPy."""
+    """f_r(l, v) (n.l) at the pixel centres of the sphere (docs/validation.md#validation-rendering framing), NumPy."""
     c = (np.arange(size) + 0.5) * (2.0 / size) - 1.0
     x, y = np.meshgrid(c, -c)
     inside = x * x + y * y < 1.0

@@ -1,4 +1,4 @@
-"""The ``brdffit`` plugin in every Mitsuba variant this Mitsuba ships (SPEC 8): the same fit renders
+"""The ``brdffit`` plugin in every Mitsuba variant this Mitsuba ships (docs/materials.md#a-fit-in-any-mitsuba-scene): the same fit renders
 the same colours in RGB, spectral and mono variants, scalar and LLVM, polarized or not (before, the
 spectral ones failed with ``std::bad_cast`` or "error while performing a custom differentiable
 operation", README's own example included); every library model's formula runs in Dr.Jit and as

@@ -88,7 +88,7 @@ def test_extra_weights_multiply_and_exclude():
         prepare(m, odd)
     assert str(caught.value) == ("case: no valid samples to fit (all have weight 0, non-finite values or lie "
                                  "below the horizon)")
-    odd[0] = np.inf  # an infinite one is refused (issue 28): it would leave every other sample weight 0
+    odd[0] = np.inf  # an infinite one is refused (docs/fitting.md#hostile-but-valid-data): it would leave every other sample weight 0
     with pytest.raises(UsageError) as caught:
         prepare(m, odd)
     assert str(caught.value) == ("case: weights=: 1 sample(s) have an infinite weight (the first: sample 0); "

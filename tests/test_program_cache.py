@@ -1,4 +1,4 @@
-"""The disk cache of compiled fit programs (brdffit.fitting.cache, SPEC 5), in new processes: a
+"""The disk cache of compiled fit programs (brdffit.fitting.cache, docs/fitting.md#fitting), in new processes: a
 second process loads the program ready-compiled (no tracing, no lowering, no scipy.linalg), and a
 program that JAX's own cache handed back is never kept (serialised again, it lacks its machine code
 and the next process would fail with "Function ... not found"): it is compiled afresh and kept."""

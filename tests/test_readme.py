@@ -1,4 +1,4 @@
-"""Every code block of the README runs as written, in a fresh temporary folder (issue 10, defect 1).
+"""Every code block of the README runs as written, in a fresh temporary folder (docs/DESIGN.md#where-users-meet-brdffit, defect 1).
 
 - ``python`` blocks run as scripts; the one made of ``# conftest.py`` and ``# test_*.py`` parts is
   written out as those files and run by pytest against the shared data (skipped, with the reason,

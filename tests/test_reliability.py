@@ -1,4 +1,4 @@
-"""Issue 9's reproductions, each as SPEC 10 says it must behave: RGL files verified before
+"""docs/cli.md#bad-input's reproductions, each as docs/cli.md#the-command-line-and-set-up says it must behave: RGL files verified before
 Mitsuba, fit.json checked like any input, usage errors exit 2 with one line, one acceptance rule
 for all readers, suspect data refused or warned about, --debug anywhere."""
 

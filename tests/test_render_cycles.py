@@ -1,4 +1,4 @@
-"""renderer="cycles" (SPEC 13): a blender:principled fit rendered by Blender's Cycles in the SPEC 6
+"""renderer="cycles" (docs/materials.md#native-materials-and-exports): a blender:principled fit rendered by Blender's Cycles in the docs/validation.md#validation-rendering
 framing agrees with the same fit rendered by Mitsuba; validate / CLI `validate --renderer cycles`;
 fits and sources Cycles cannot render are one line."""
 
@@ -41,7 +41,7 @@ def block_errors(a, b, k=8):
 
 @pytest.mark.parametrize("name", sorted(FITS))
 def test_cycles_and_mitsuba_render_one_fit_alike(blender, name):
-    """Mean per light and channel within 3 % (SPEC 13; measured: 0.01-0.5 %), and where the light
+    """Mean per light and channel within 3 % (docs/materials.md#native-materials-and-exports; measured: 0.01-0.5 %), and where the light
     falls: 8 x 8 block means within 10 % RMS (measured: plastic 0.05-0.3 %, metal 1.1-3.8 %)."""
     params, size = FITS[name], 64
     lights = default_lights()

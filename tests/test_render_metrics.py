@@ -80,8 +80,8 @@ def test_overall_metrics_pool_the_lights():
     assert overall["flip"] == pytest.approx(np.mean([p["flip"] for p in per]), rel=1e-12)
 
 
-# cos(theta_light) of the UBO-81 rows, from SPEC 1 (rings of 1, 6, 12, 18, 20, 24 directions at
-# 0, 15, ..., 75 degrees): the log residual of SPEC 5 is ln(1 + f cos) - ln(1 + f_ref cos).
+# cos(theta_light) of the UBO-81 rows, from docs/conventions.md#conventions (rings of 1, 6, 12, 18, 20, 24 directions at
+# 0, 15, ..., 75 degrees): the log residual of docs/fitting.md#fitting is ln(1 + f cos) - ln(1 + f_ref cos).
 COS_LIGHT = np.repeat(np.cos(np.radians([0, 15, 30, 45, 60, 75])), [1, 6, 12, 18, 20, 24])
 
 

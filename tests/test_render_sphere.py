@@ -1,6 +1,6 @@
-"""render_sphere against an independent closed-form shading in NumPy (SPEC 6 framing).
+"""render_sphere against an independent closed-form shading in NumPy (docs/validation.md#validation-rendering framing).
 
-The closed form knows only the SPEC: pixel (i, j) covers [x0, x0 + 2/size] x [y0 - 2/size, y0] with
+The closed form knows only docs/validation.md#validation-rendering: pixel (i, j) covers [x0, x0 + 2/size] x [y0 - 2/size, y0] with
 centre x = 2(j + 0.5)/size - 1, y = 1 - 2(i + 0.5)/size; the box filter averages over it. A point
 (x, y) on the disc has normal n = (x, y, sqrt(1 - x^2 - y^2)), the view is v = +z, radiance is
 f_r(wi, wo) (n.l) E. The tangent frame is the documented one (scene.py): s = (z, 0, -x)/|.|,

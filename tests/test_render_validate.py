@@ -83,8 +83,8 @@ def test_table_metrics_of_a_different_fit_by_hand():
     t = v.metrics["table"]
     assert t["rmse"] == pytest.approx(np.sqrt(np.mean(d**2)), rel=1e-6)
     assert t["rel_rmse"] == pytest.approx(np.sqrt(np.mean(d**2) / np.mean(r**2)), rel=1e-6)
-    # SPEC 5's one log residual: ln(1 + f cos theta_light) - ln(1 + f_ref cos theta_light); the
-    # UBO-81 rows' cosines written out from SPEC 1 (rings of 1, 6, 12, 18, 20, 24 at 0..75 degrees)
+    # docs/fitting.md#fitting's one log residual: ln(1 + f cos theta_light) - ln(1 + f_ref cos theta_light); the
+    # UBO-81 rows' cosines written out from docs/conventions.md#conventions (rings of 1, 6, 12, 18, 20, 24 at 0..75 degrees)
     c = np.repeat(np.cos(np.radians([0, 15, 30, 45, 60, 75])), [1, 6, 12, 18, 20, 24])[:, None, None]
     assert t["log_rmse"] == pytest.approx(np.sqrt(np.mean((np.log1p(f * c) - np.log1p(r * c)) ** 2)), rel=1e-6)
     assert t["valid_pairs"] == 6561

@@ -201,7 +201,7 @@ def test_unseen_lobes_are_found_and_reseeded():
 
 @pytest.mark.parametrize("solver", ["lm", "dogleg"])
 def test_a_noise_free_lafortune_mirror_lobe_is_reached(solver):
-    """Issue 28's adversarial case: kd 0.2, rho 1, cx -1, cz 1, n 50 on the UBO-81 pairs. The default
+    """docs/fitting.md#hostile-but-valid-data's adversarial case: kd 0.2, rho 1, cx -1, cz 1, n 50 on the UBO-81 pairs. The default
     start used to sit at (cx, cz) = (-1.84, 1.92), n 160, where |C|^n reaches the formula's cap: lm
     stopped there "converged" at rel_rmse 0.087, dogleg at 0.46. The grid now tries lobe directions
     of |C| about 1 (lafortune.C_GRID)."""

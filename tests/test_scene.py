@@ -1,4 +1,4 @@
-"""Scene-aware fitting (SPEC 12): scene_usage, Usage.weights, fit(scene=), render/validate_scene, CLI."""
+"""Scene-aware fitting (docs/scene.md#scene-aware-fitting): scene_usage, Usage.weights, fit(scene=), render/validate_scene, CLI."""
 
 from __future__ import annotations
 

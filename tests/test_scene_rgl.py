@@ -1,4 +1,4 @@
-"""Issue 12 "must show" on real data: on the grazing floor, the scene-aware ggx fit renders the scene
+"""docs/scene.md#scene-aware-fitting "must show" on real data: on the grazing floor, the scene-aware ggx fit renders the scene
 with lower FLIP than the plain fit for every shared RGL material, by more than it costs on the sphere
 validation. Cheaper settings than benchmarks/bench_scene.py (which prints the full figures)."""
 

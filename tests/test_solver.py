@@ -1,4 +1,4 @@
-"""The fitting core's solver (SPEC 5): the default ``lm`` is an optimistix solver class, bounds and
+"""The fitting core's solver (docs/fitting.md#fitting): the default ``lm`` is an optimistix solver class, bounds and
 held parameters are runtime arrays (infinite bounds included), tolerances are relative to the
 data's scale, CLI and API share one set of defaults, statuses. Small synthetic problems, except
 one composite fit on the bundled sample measurement."""

@@ -1,4 +1,4 @@
-"""Users' surfaces of issue 10 (defects 3, 5, 6, 10): Report.pareto, FitResult.eval, light
+"""Users' surfaces of docs/DESIGN.md#where-users-meet-brdffit (defects 3, 5, 6, 10): Report.pareto, FitResult.eval, light
 directions, reprs, dir(brdffit), `brdffit models`, `fit --help`, `info`, tables when piped."""
 
 from __future__ import annotations
@@ -147,7 +147,7 @@ def test_dir_lists_public_names_only():
         assert public in names
 
 
-# -- defect 10 / SPEC 10: models command, fit --help, ggx's Lambert term ---------------------------------
+# -- defect 10 / docs/cli.md#the-command-line-and-set-up: models command, fit --help, ggx's Lambert term ---------------------------------
 def test_models_command_lists_every_model(capsys):
     assert main(["models"]) == 0
     out = capsys.readouterr().out

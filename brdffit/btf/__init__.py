@@ -1,4 +1,4 @@
-"""Per-texel fitting of UBO BTFs (SPEC 7): read (:func:`load_btf`), fit (:func:`fit_btf` ->
+"""Per-texel fitting of UBO BTFs (docs/btf.md#btfs-per-texel-fitting): read (:func:`load_btf`), fit (:func:`fit_btf` ->
 :class:`ParameterMaps`; here, on ``jax.distributed`` processes or a Dask cluster), fit a folder of
 BTFs (:func:`fit_btf_database`), validate against the BTF's own photographs (:func:`validate_btf`),
 and generated test BTFs (:mod:`brdffit.btf.generate`)."""

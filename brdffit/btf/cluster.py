@@ -1,5 +1,5 @@
 """``fit_btf(..., client=CLIENT)``: a BTF's tiles fitted as Dask tasks on a cluster's workers
-(SPEC 7 "At scale"; ``pip install 'brdffit[cluster]'``).
+(docs/btf.md#at-scale; ``pip install 'brdffit[cluster]'``).
 
 Dask (``dask.distributed``) is the engine: a ``Client`` of any of its clusters (``LocalCluster``,
 SSH, Kubernetes, SLURM / PBS / ... through ``dask-jobqueue``) is given to ``fit_btf``, which submits

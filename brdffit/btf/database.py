@@ -1,4 +1,4 @@
-"""``brdffit.fit_btf_database``: every BTF of a folder fitted, each into ``OUT/<name>/`` (SPEC 7
+"""``brdffit.fit_btf_database``: every BTF of a folder fitted, each into ``OUT/<name>/`` (docs/btf.md#btfs-per-texel-fitting
 "At scale"; ``brdffit fit-btf DIR`` when DIR holds several BTFs).
 
 A database folder holds BTFs as entries of its own: image folders (the layouts ``load_btf``

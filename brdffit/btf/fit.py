@@ -1,4 +1,4 @@
-"""``brdffit.fit_btf``: every texel of a BTF fitted on its own (SPEC 7).
+"""``brdffit.fit_btf``: every texel of a BTF fitted on its own (docs/btf.md#btfs-per-texel-fitting).
 
 The work unit is a *tile* of the BTF's cache (16 x 16 texels by default, see
 :mod:`brdffit.btf.reader`), fitted by :func:`brdffit.btf.tile.fit_tiles` (one read per tile, the texels

@@ -1,4 +1,4 @@
-"""``ParameterMaps``: the result of a per-texel fit (SPEC 7), and its files.
+"""``ParameterMaps``: the result of a per-texel fit (docs/btf.md#btfs-per-texel-fitting), and its files.
 
 ``params.exr`` is a multi-part OpenEXR (OpenEXR 3.5 Python API): one part per model parameter,
 named after it, channels ``R,G,B`` (a parameter with one value per colour channel) or ``Y``,
@@ -153,7 +153,7 @@ class ParameterMaps:
 
     def export(self, path, *, bsdf_id: str | None = None, force: bool = False, source=None) -> list[Path]:
         """The maps of a native model as the renderer's own material with every map a texture
-        (SPEC 7, 13), the extension picking the format: ``.xml`` Mitsuba 3 (textures in
+        (docs/btf.md#btfs-per-texel-fitting and docs/materials.md#native-materials-and-exports), the extension picking the format: ``.xml`` Mitsuba 3 (textures in
         ``<stem>_textures/`` beside it), ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender. Returns the
         paths written; see :mod:`brdffit.materials.textured`."""
         from ..materials.textured import export_maps

@@ -1,4 +1,4 @@
-"""``brdffit.load_btf``: a UBO BTF, every texel its own 81x81 table (SPEC 7).
+"""``brdffit.load_btf``: a UBO BTF, every texel its own 81x81 table (docs/btf.md#btfs-per-texel-fitting).
 
 Sources: an image folder of the layouts ``brdffit.load`` reads (flat, or per-view sub-folders
 ``tvTTT_pvPPP/``; png / jpg / exr / hdr; names with ``_`` or spaces between the fields), or a

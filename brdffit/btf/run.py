@@ -1,5 +1,5 @@
 """A ``fit_btf`` run's folder, ``DIR/tiles``: what identifies the run, one file per finished tile,
-the lock (SPEC 7 "An interrupted run resumes").
+the lock (docs/btf.md#resuming).
 
 - ``run.json`` identifies the run: the BTF's content signature, model, loss, solver options,
   neighbour starts, tile edge and shape. A run that finds the same ``run.json`` fits only the tiles

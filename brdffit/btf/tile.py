@@ -1,4 +1,4 @@
-"""One tile of a BTF fitted (``brdffit.fit_btf``'s unit of work, SPEC 7).
+"""One tile of a BTF fitted (``brdffit.fit_btf``'s unit of work, docs/btf.md#btfs-per-texel-fitting).
 
 Neighbouring texels' results as starts (``neighbours=True``, the default). Inside a tile the
 texels are fitted in passes over nested lattices (:func:`neighbour_passes`, strides 4, 2, 1):

@@ -1,5 +1,5 @@
 """``brdffit.validate_btf``: fitted parameter maps rendered in Mitsuba 3 beside the BTF's own
-photographs (SPEC 7).
+photographs (docs/btf.md#btfs-per-texel-fitting).
 
 The scene holds only what this comparison needs: a square (Mitsuba's ``rectangle``, [-1, 1]^2 in
 the plane z = 0, normal +z, texture coordinates u = (x + 1)/2, v = (y + 1)/2) carrying the maps, an
@@ -18,7 +18,7 @@ stores (``load_btf`` already divides out cos(theta_light) for ``includes_cos`` d
 
 The BSDF evaluates the model's own JAX formula (``model.eval``, the one definition) with each
 lane's texel parameters: it reuses the callback BSDF of :mod:`brdffit.render.bsdf` (evaluated
-Dr.Jit calls, the SPEC 1 direction conventions at the boundary) and adds the texture lookup
+Dr.Jit calls, the docs/conventions.md#conventions direction conventions at the boundary) and adds the texture lookup
 (nearest texel of ``si.uv``; row 0 at the top, v = 1).
 
 Metrics per pair (:mod:`brdffit.render.metrics`): RMSE and relative RMSE of f_r over the texels,

@@ -1,4 +1,4 @@
-"""``brdffit`` command line (SPEC 7).
+"""``brdffit`` command line (docs/cli.md#the-command-line-and-set-up).
 
 Exit status: 0 success; 1 a fit ran but did not converge (results still written, marked);
 2 bad input or usage (one line naming the file and the problem, no traceback unless --debug,
@@ -148,7 +148,7 @@ def _show_warnings(caught, debug: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the CLI and map errors to SPEC 10 exit statuses."""
+    """Entry point: run the CLI and map errors to docs/cli.md#the-command-line-and-set-up exit statuses."""
     argv, debug = _split_debug(list(sys.argv[1:] if argv is None else argv))
     from .._files import forget_committed
 
@@ -204,7 +204,7 @@ def entry() -> None:
     and module teardown still run; the exit is not skipped). Ctrl-C ends the process from a watcher
     thread (``brdffit._interrupt``; the package's first line installs it already).
     (It used to skip the teardown with ``os._exit`` to save ~0.4 s; that also hid the abort at exit
-    of issue 13 -- a daemon compile thread -- which is fixed in the library now, and skipped
+    of docs/DESIGN.md#tests-that-fail-when-the-code-is-wrong -- a daemon compile thread -- which is fixed in the library now, and skipped
     atexit handlers such as coverage's.)
     """
     import gc

@@ -1,5 +1,5 @@
 """``brdffit compare SOURCE [--models ...] [--solvers ...] [--losses ...] -o DIR``: error against
-run time for every combination (SPEC 7). Writes report.csv, report.json, pareto.png. Exit 1 when
+run time for every combination (docs/cli.md#the-command-line-and-set-up). Writes report.csv, report.json, pareto.png. Exit 1 when
 any fit did not converge (the rows say which)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``brdffit convert SOURCE OUT``: any readable source to a UBO-81 EXR or NPZ table (SPEC 7)."""
+"""``brdffit convert SOURCE OUT``: any readable source to a UBO-81 EXR or NPZ table (docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 

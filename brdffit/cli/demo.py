@@ -1,4 +1,4 @@
-"""``brdffit demo [-o DIR] [--force]``: the pipeline on the bundled sample (SPEC 7)."""
+"""``brdffit demo [-o DIR] [--force]``: the pipeline on the bundled sample (docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``brdffit export FIT.json [--to MODEL] [-o FILE]``: the fit as a material file (SPEC 8, 10, 13)."""
+"""``brdffit export FIT.json [--to MODEL] [-o FILE]``: the fit as a material file (docs/materials.md#a-fit-in-any-mitsuba-scene, docs/cli.md#the-command-line-and-set-up, docs/materials.md#native-materials-and-exports)."""
 
 from __future__ import annotations
 

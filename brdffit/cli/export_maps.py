@@ -1,5 +1,5 @@
 """``brdffit export PARAMS.exr -o FILE``: fitted parameter maps as a textured native material
-(SPEC 7, 13); ``brdffit export`` hands a ``.exr`` argument here (:mod:`brdffit.cli.export`)."""
+(docs/btf.md#btfs-per-texel-fitting and docs/materials.md#native-materials-and-exports); ``brdffit export`` hands a ``.exr`` argument here (:mod:`brdffit.cli.export`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``brdffit fit SOURCE --model M [--loss L] [--solver S] -o DIR``: one fit (SPEC 7).
+"""``brdffit fit SOURCE --model M [--loss L] [--solver S] -o DIR``: one fit (docs/cli.md#the-command-line-and-set-up).
 
 Writes DIR/fit.json (``FitResult.to_json``) and DIR/fit.png: for a UBO-81 measurement the 81x81
 table measured | fitted | log residual per channel (``brdffit.plot.fit_figure``); for scattered
@@ -132,7 +132,7 @@ def _fit(figure, source, model, loss, solver, multistart, max_steps, bound_items
             stack.enter_context(reserve(out, force, folder=True))
         status = stack.enter_context(console.status(f"reading {source}") if live else contextlib.nullcontext())
         usage = None
-        if scene is not None or material is not None:  # SPEC 12: scene-aware fit
+        if scene is not None or material is not None:  # docs/scene.md#scene-aware-fitting: scene-aware fit
             from ..scene.usage import cli_usage
 
             if live:

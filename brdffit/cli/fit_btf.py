@@ -1,5 +1,5 @@
 """``brdffit fit-btf FOLDER --model M [-o DIR] [--scheduler ADDRESS]``: per-texel fit of a BTF, or of
-every BTF of a database folder (SPEC 7, 10).
+every BTF of a database folder (docs/btf.md#btfs-per-texel-fitting and docs/cli.md#the-command-line-and-set-up).
 
 Writes DIR/params.exr (one part per parameter, plus loss / converged / steps), preview PNGs, maps.png
 and summary.json (see :mod:`brdffit.btf.maps`). Finished tiles are kept in DIR/tiles while the run

@@ -1,4 +1,4 @@
-"""``brdffit info SOURCE``: what a measurement holds (SPEC 7)."""
+"""``brdffit info SOURCE``: what a measurement holds (docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``brdffit models``: every model with its parameters, bounds and citation (SPEC 10)."""
+"""``brdffit models``: every model with its parameters, bounds and citation (docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def lambert_note(model) -> str:
 
 
 def mitsuba_note(model) -> str:
-    """How a fit of ``model`` renders in Mitsuba (SPEC 8, 13), parameter maps included."""
+    """How a fit of ``model`` renders in Mitsuba (docs/materials.md#a-fit-in-any-mitsuba-scene and docs/materials.md#native-materials-and-exports), parameter maps included."""
     if model.target == "mitsuba":
         from ..materials.textured_mitsuba import TEXTURED
 

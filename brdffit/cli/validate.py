@@ -1,4 +1,4 @@
-"""``brdffit validate SOURCE FIT.json [-o DIR] [--renderer cycles]``: renders, panels, metrics (SPEC 6, 7, 13)."""
+"""``brdffit validate SOURCE FIT.json [-o DIR] [--renderer cycles]``: renders, panels, metrics (docs/validation.md#validation-rendering, docs/btf.md#btfs-per-texel-fitting, docs/materials.md#native-materials-and-exports)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """``brdffit validate-btf FOLDER DIR/params.exr [-o DIR]``: the fitted maps rendered in Mitsuba 3
-beside the BTF's photographs of chosen (light, view) pairs (SPEC 7, 10)."""
+beside the BTF's photographs of chosen (light, view) pairs (docs/btf.md#btfs-per-texel-fitting and docs/cli.md#the-command-line-and-set-up)."""
 
 from __future__ import annotations
 

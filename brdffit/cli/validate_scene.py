@@ -1,4 +1,4 @@
-"""``brdffit validate-scene SCENE.xml ID FIT.json --reference SOURCE [-o DIR]`` (SPEC 12)."""
+"""``brdffit validate-scene SCENE.xml ID FIT.json --reference SOURCE [-o DIR]`` (docs/scene.md#scene-aware-fitting)."""
 
 from __future__ import annotations
 

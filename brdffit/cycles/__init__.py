@@ -1,4 +1,4 @@
-"""Blender's Cycles, driven in a worker process (SPEC 13): the second renderer and the ``.blend`` export.
+"""Blender's Cycles, driven in a worker process (docs/materials.md#native-materials-and-exports): the second renderer and the ``.blend`` export.
 
 Blender runs as ``bpy`` 5.0.1 (Blender as a Python module), which needs numpy < 2 while jax needs
 numpy >= 2, so it lives in an environment of its own and brdffit never imports it. The worker
@@ -291,7 +291,7 @@ def gonio(material, wi, wo, irradiance: float = 1.0) -> np.ndarray:
 def render_sphere(material, lights, size: int = 256, irradiance: float = 1.0, spp: int = 4,
                   seed: int = 0) -> np.ndarray:
     """(L, size, size, 3) linear radiance of the unit sphere with ``material`` (as :func:`gonio`) in
-    Cycles, one image per light (unit world directions towards the lights), SPEC 6 framing; not masked."""
+    Cycles, one image per light (unit world directions towards the lights), docs/validation.md#validation-rendering framing; not masked."""
     args = {**_material(material), "lights": _dirs(lights, "lights").tolist(), "size": int(size),
             "irradiance": float(irradiance), "spp": int(spp), "seed": int(seed)}
     return _load("sphere", args, "images")

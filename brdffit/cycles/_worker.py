@@ -191,7 +191,7 @@ def op_gonio(args, out):
 
 
 def op_sphere(args, out):
-    """The SPEC 6 framing: a unit sphere (a Cycles point primitive, an exact sphere) at the origin,
+    """The docs/validation.md#validation-rendering framing: a unit sphere (a Cycles point primitive, an exact sphere) at the origin,
     an orthographic camera on +z looking down -z with +y up covering [-1, 1]^2, one sun per image."""
     lights = directions(args["lights"], "lights")
     size = int(args["size"])

@@ -1,4 +1,4 @@
-"""Interactive exploration in Jupyter (SPEC 14): ``brdffit.explore(source)`` is a widget that shows
+"""Interactive exploration in Jupyter (docs/explorer.md#the-explorer): ``brdffit.explore(source)`` is a widget that shows
 a fit over its measurement and changes with it.
 
 Views, updated together: the measured and fitted 81x81 tables and their log residual; in-plane

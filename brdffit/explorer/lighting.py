@@ -1,7 +1,7 @@
 """What the explorer computes once per light: the slices' geometry, the table row of the light and
 the sphere preview's directions, with the measured sphere.
 
-The sphere preview is the validation render (``brdffit.render_sphere``, SPEC 6) evaluated at the
+The sphere preview is the validation render (``brdffit.render_sphere``, docs/validation.md#validation-rendering) evaluated at the
 pixel centres instead of rendered: the same framing (orthographic camera on +z, the unit sphere
 filling [-1, 1]^2, pixel centres and disc from ``brdffit.render.scene``), the same shading frame
 (normal n = the surface point, tangent s = (z, 0, -x) / sqrt(x^2 + z^2), bitangent n x s: see

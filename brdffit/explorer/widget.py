@@ -47,7 +47,7 @@ def _model_names() -> list[str]:
 
 
 class Explorer(anywidget.AnyWidget):
-    """One measurement and its fits, interactively (SPEC 14). Made by :func:`brdffit.explore`.
+    """One measurement and its fits, interactively (docs/explorer.md#the-explorer). Made by :func:`brdffit.explore`.
 
     Python side: :attr:`params` / :meth:`set_params`, :attr:`model` (settable), :attr:`light`
     ((theta, phi) degrees, settable), :attr:`exposure` (stops, settable), :meth:`fit`,

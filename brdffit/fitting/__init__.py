@@ -1,4 +1,4 @@
-"""Fitting engine (SPEC 5): ``fit``, ``fit_batch``, ``FitResult``, ``compare``, ``Report``, ``select``.
+"""Fitting engine (docs/fitting.md#fitting): ``fit``, ``fit_batch``, ``FitResult``, ``compare``, ``Report``, ``select``.
 
 The modules, in the order a fit uses them (read them so):
 

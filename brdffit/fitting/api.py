@@ -75,11 +75,11 @@ def fit(
     (None on a side keeps it), ``fixed={"name": value}`` to hold a parameter. Lobes of one kind
     come out narrowest first. ``.at_bound`` and ``.warnings`` report what the constraints decided.
 
-    scene: a ``brdffit.scene.Usage`` (``brdffit.scene_usage``, SPEC 12): the samples are weighted
+    scene: a ``brdffit.scene.Usage`` (``brdffit.scene_usage``, docs/scene.md#scene-aware-fitting): the samples are weighted
     by where that scene looks (``usage.weights``), times ``weights``.
     """
     scene_note = None
-    if scene is not None:  # SPEC 12
+    if scene is not None:  # docs/scene.md#scene-aware-fitting
         weights = scene.weights(measurement) * (1.0 if weights is None else np.asarray(weights, np.float64))
         scene_note = _coverage_note(scene, measurement)
     options = FitOptions(loss=loss, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, multistart=multistart,
@@ -147,7 +147,7 @@ COVERAGE_WARN = 0.95
 
 
 def _coverage_note(scene, measurement: Measurement) -> str | None:
-    """One sentence when the data cover too little of where ``scene`` looks (issue 28: such a fit
+    """One sentence when the data cover too little of where ``scene`` looks (docs/fitting.md#hostile-but-valid-data: such a fit
     was the plain fit without a word), else None."""
     if not hasattr(scene, "coverage"):  # any object with weights(measurement) may weight a fit
         return None

@@ -1,4 +1,4 @@
-"""Persistent compilation cache (SPEC 5): compiled solvers are kept on disk, so a second process
+"""Persistent compilation cache (docs/fitting.md#fitting): compiled solvers are kept on disk, so a second process
 does not compile again.
 
 In ``<user cache folder>/jax`` (``platformdirs.user_cache_dir("brdffit")``: ``~/.cache/brdffit``

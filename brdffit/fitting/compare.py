@@ -1,4 +1,4 @@
-"""`brdffit.compare`: error against run time for every model x solver x loss (SPEC 5)."""
+"""`brdffit.compare`: error against run time for every model x solver x loss (docs/fitting.md#fitting)."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ class Report:
         return min(self.rows, key=lambda r: r[metric])
 
     def pareto(self, metric: str = "loss_log", rtol: float = 1e-6) -> list[dict[str, Any]]:
-        """The rows on the error-against-run-time front, fastest first (SPEC 5): a row is on it
+        """The rows on the error-against-run-time front, fastest first (docs/fitting.md#fitting): a row is on it
         when no other row is both at least as fast and lower in ``metric`` by more than ``rtol``
         relative. Rows whose errors tie within ``rtol`` keep only the fastest (the first of equally
         fast ones)."""

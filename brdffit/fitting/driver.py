@@ -1,4 +1,4 @@
-"""The fit driver: every fit of brdffit runs here, as a batch (SPEC 5: a single fit is a batch of one).
+"""The fit driver: every fit of brdffit runs here, as a batch (docs/fitting.md#fitting: a single fit is a batch of one).
 
 ``brdffit.fit`` (one measurement), ``brdffit.fit_batch`` (many) and ``brdffit.fit_btf`` (the texels of a
 BTF, tile by tile) check their options into one :class:`~brdffit.fitting.options.FitOptions` and call

@@ -1,4 +1,4 @@
-"""A fit.json is input like any other (SPEC 10): checked completely before it is used.
+"""A fit.json is input like any other (docs/cli.md#the-command-line-and-set-up): checked completely before it is used.
 
 :func:`parse_fit_text` turns the file's text into a document or one ``InputError`` line (a text
 that is not Unicode, a lone surrogate in any string, included); :func:`check_fit_document`
@@ -38,7 +38,7 @@ _FLOAT_MAPS = ("metrics", "seconds")
 #: JSON type each field must have
 _CONVERSION_TEXT = ("model", "data_name", "grid", "loss")
 _CONVERSION_NUMBERS = ("rel_rmse", "log_rmse")
-#: metric names read under today's name: the relative RMSE is ``rel_rmse`` everywhere (SPEC 5, 13);
+#: metric names read under today's name: the relative RMSE is ``rel_rmse`` everywhere (docs/fitting.md#fitting and docs/materials.md#native-materials-and-exports);
 #: the image metrics called it ``relative_rmse`` before
 METRIC_ALIASES = {"relative_rmse": "rel_rmse"}
 #: relative slack on recorded bounds: values are written with full precision, this only absorbs

@@ -270,7 +270,7 @@ def subset_index(data: Data) -> np.ndarray | None:
     """Rows the grid scores for ``data``: the fixed pseudo-random subset of a table whose samples are
     all used; where some are not (weight 0, NaN), the subset is drawn from the used ones (all of them
     when they are fewer, the rest of its fixed length filled with unused rows, which weigh nothing),
-    so that masked samples do not crowd out the data (issue 28: 5 valid samples in a UBO table were
+    so that masked samples do not crowd out the data (docs/fitting.md#hostile-but-valid-data: 5 valid samples in a UBO table were
     about 0.6 in a random subset, and the fit ended on a needle lobe the same samples given alone
     did not). None: all rows. A lobe the subset misses (a narrow peak on a few mirror samples) and
     the solve then switches off is tried again on every row (:func:`reseed_points`, ``driver.solve``)."""

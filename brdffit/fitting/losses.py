@@ -1,4 +1,4 @@
-"""Fitting losses (SPEC 5): each is a per-sample transform g applied to model and reference alike.
+"""Fitting losses (docs/fitting.md#fitting): each is a per-sample transform g applied to model and reference alike.
 
 The residual of sample k, channel c is ``sqrt(w_k) * (g(f_model) - g(f_ref))``, with the weights
 normalised so that the sum of squared residuals is the weighted *mean* squared difference (the
@@ -117,7 +117,7 @@ def log_residual(f, ref, cos_i):
 
 
 def log_rmse(f, ref, cos_i, used):
-    """The one ``log_rmse`` (SPEC 5): RMS of :func:`log_residual` over the used samples (``used``
+    """The one ``log_rmse`` (docs/fitting.md#fitting): RMS of :func:`log_residual` over the used samples (``used``
     (N, 1) or (..., 1) in {0, 1}) and every channel, equally weighted. Fit metrics, compare rows,
     validate's metrics.json and the table figure all call this."""
     ld = log_residual(f, ref, cos_i) * used

@@ -87,7 +87,7 @@ def _rows_replaced(a: np.ndarray, keep: np.ndarray, stand_in) -> np.ndarray:
 
 
 def _refuse_infinite(w: np.ndarray, what: str) -> None:
-    """An infinite weight would make every other sample's weight 0 and the residuals NaN (issue 28:
+    """An infinite weight would make every other sample's weight 0 and the residuals NaN (docs/fitting.md#hostile-but-valid-data:
     the fit then wrote NaN parameters): one clear line instead. NaN and negative weights keep their
     meaning, "leave this sample out"."""
     bad = np.isinf(w) & (w > 0)

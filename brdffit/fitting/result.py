@@ -1,4 +1,4 @@
-"""`FitResult` (SPEC 5): what a fit found, how well, how fast, and whether it converged.
+"""`FitResult` (docs/fitting.md#fitting): what a fit found, how well, how fast, and whether it converged.
 
 A FitResult is data: its fields, its JSON (``to_json`` / ``from_json``) and ``eval`` (the fitted
 model's f_r). What other layers do with a fit are their functions: :func:`brdffit.materials.export`
@@ -70,7 +70,7 @@ def _floats(a) -> list[float]:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class FitResult:
-    """One fit. ``params`` maps SPEC parameter names to numpy arrays of shape (size,)."""
+    """One fit. ``params`` maps the model's parameter names (docs/models.md#models) to numpy arrays of shape (size,)."""
 
     model: Model
     params: dict[str, np.ndarray]
@@ -125,7 +125,7 @@ class FitResult:
     def eval(
         self, wi: Float[np.ndarray, "N 3"] | Float[np.ndarray, "3"], wo: Float[np.ndarray, "N 3"] | Float[np.ndarray, "3"]
     ) -> Float[np.ndarray, "N C"] | Float[np.ndarray, " C"]:
-        """f_r of the fitted model as a NumPy array (SPEC 5): (N, 3) directions give (N, C), a single
+        """f_r of the fitted model as a NumPy array (docs/fitting.md#fitting): (N, 3) directions give (N, C), a single
         (3,) pair gives (C,), a (3,) direction against (N, 3) others is broadcast. Directions below
         the horizon (z <= 0 for either) give 0. ``self.model.eval`` is the differentiable JAX form
         ((N, 3) only, JAX arrays, no horizon test): use it inside ``jax.grad`` / ``jit``."""
@@ -174,7 +174,7 @@ class FitResult:
         )
 
     def to_mitsuba(self) -> dict:
-        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (SPEC 8):
+        """A BSDF dict for ``mi.load_dict`` that renders this fit in any Mitsuba 3 scene (docs/materials.md#a-fit-in-any-mitsuba-scene):
         :func:`brdffit.mitsuba_bsdf` of this fit (for a ``mitsuba:*`` fit Mitsuba's own plugin,
         otherwise the ``brdffit`` plugin with the same JAX formula)."""
         from ..render.export import mitsuba_bsdf
@@ -184,7 +184,7 @@ class FitResult:
     def convert(self, model: str | Model, **options) -> "FitResult":
         """This fit as ``model`` (a native model: ``mitsuba:roughplastic``, ``gltf:metallic_roughness``,
         ...): ``model`` fitted to this fit's BRDF on the UBO-81 grid, the conversion error in
-        ``options["converted_from"]`` (SPEC 13; :func:`brdffit.materials.convert`)."""
+        ``options["converted_from"]`` (docs/materials.md#native-materials-and-exports; :func:`brdffit.materials.convert`)."""
         from ..materials import convert
 
         return convert(self, getattr(model, "name", model), **options)
@@ -192,7 +192,7 @@ class FitResult:
     def export(self, path: str | os.PathLike, to: str | Model | None = None, *, bsdf_id: str | None = None,
                force: bool = False) -> "FitResult":
         """Write this fit as a material file, the extension picking the format: ``.xml`` Mitsuba 3,
-        ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (SPEC 13;
+        ``.glb``/``.gltf`` glTF 2.0, ``.blend`` Blender, ``.mtlx`` MaterialX (docs/materials.md#native-materials-and-exports;
         :func:`brdffit.materials.export`). With ``to``, the fit is converted first; returns the fit
         written. ``bsdf_id`` is held to the CLI's ``--id`` rule (letters, digits, '_', not starting with
         a digit; else UsageError); default: the file's name made so."""

@@ -1,4 +1,4 @@
-"""Solving one start (SPEC 5): the constants a fit computes once, the solve by its solver family, and
+"""Solving one start (docs/fitting.md#fitting): the constants a fit computes once, the solve by its solver family, and
 the check of its result.
 
 Solver families, one per file: ``lm`` (the default, brdffit's bounded Levenberg-Marquardt:

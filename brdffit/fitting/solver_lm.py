@@ -1,4 +1,4 @@
-"""``lm``, the default solver: brdffit's bounded Levenberg-Marquardt as an optimistix solver (SPEC 5).
+"""``lm``, the default solver: brdffit's bounded Levenberg-Marquardt as an optimistix solver (docs/fitting.md#fitting).
 
 :class:`BoundedLevenbergMarquardt` is a projected Levenberg-Marquardt written as an optimistix
 least-squares solver and run by ``optx.least_squares(..., throw=False)``: bounds are handled inside

@@ -1,4 +1,4 @@
-"""optimistix's stock solvers (``optx_lm``, ``gauss_newton``, ``dogleg``, ``bfgs``; SPEC 5).
+"""optimistix's stock solvers (``optx_lm``, ``gauss_newton``, ``dogleg``, ``bfgs``; docs/fitting.md#fitting).
 
 They know no bounds: they see an unconstrained variable, mapped onto the box element by element by
 :func:`to_box` (a fold, on a log axis for parameters with a positive lower bound), and a Jacobi

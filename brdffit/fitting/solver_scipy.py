@@ -1,4 +1,4 @@
-"""``scipy``: scipy.optimize.least_squares (TRF), the reference baseline (SPEC 5), run in Python
+"""``scipy``: scipy.optimize.least_squares (TRF), the reference baseline (docs/fitting.md#fitting), run in Python
 one start at a time (the JAX residual and Jacobian compiled through the program cache)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The parameter space of one fit (SPEC 5, "Parameter space"): bounds, fixed values, lobe order.
+"""The parameter space of one fit (docs/fitting.md#parameter-space): bounds, fixed values, lobe order.
 
 ``ParameterSpace.build(model, bounds=, fixed=, physical=)`` resolves, per flat parameter entry:
 
@@ -203,7 +203,7 @@ class ParameterSpace:
         per channel ("lower in channel 0", "upper in channels 1, 2") where only some are.
 
         ``data_scale``: the mean |value| of the fitted data. A scale (linear parameter) with an open
-        side carries the unit of the data, so its tolerance is taken relative to it (issue 28: data
+        side carries the unit of the data, so its tolerance is taken relative to it (docs/fitting.md#hostile-but-valid-data: data
         x 1e-12 gave "kd 2e-13 ended on its lower bound 0" for a kd recovered exactly); without it,
         relative to the physical range as for every other parameter."""
         v = np.asarray(v, dtype=np.float64)
@@ -245,7 +245,7 @@ class ParameterSpace:
         return float((self.lo if side == "lower" else self.hi)[s][0])
 
 
-# -- warnings (SPEC 5: one sentence each) ------------------------------------------------------------
+# -- warnings (docs/fitting.md#fitting: one sentence each) ------------------------------------------------------------
 def parameter_space(model: Model, bounds=None, fixed=None, physical: bool = False) -> ParameterSpace:
     """Where a fit of ``model`` may move: flat ``lo``/``hi`` (may be infinite) and ``free`` mask, the
     runtime arguments of the start grid and of every solver."""

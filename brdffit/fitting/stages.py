@@ -1,4 +1,4 @@
-"""The compiled stages of every fit (SPEC 5): starts, solver rounds, the finish.
+"""The compiled stages of every fit (docs/fitting.md#fitting): starts, solver rounds, the finish.
 
 ``fit``, ``fit_batch`` and ``fit_btf`` all run these programs (the fit driver, ``driver``, calls them
 through ``lanes``). Each program works on a *chunk of lanes*: a lane is one solve, with its own row of

@@ -1,4 +1,4 @@
-"""Reading and writing measurements (SPEC 3): ``load``, ``save``, ``resample``.
+"""Reading and writing measurements (docs/formats.md#readers-and-writers): ``load``, ``save``, ``resample``.
 
 ``load(path, **options)`` picks the reader from the file or folder:
 
@@ -16,7 +16,7 @@ folder of images              ``images``  :mod:`brdffit.io.images` (UBO / UTIA /
 
 Every failure inside a reader reaches the caller as ``InputError(path, "<one line>")``: readers
 raise it themselves for problems they recognise, and anything unexpected from a parser is wrapped
-here, so that the CLI can always print one line that names the file (SPEC 7).
+here, so that the CLI can always print one line that names the file (docs/cli.md#bad-input).
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def _one_line(text: str) -> str:
 
 
 def load(path: str | os.PathLike, *, format: str | None = None, progress: bool = False, **options) -> Measurement:  # noqa: A002
-    """Read any supported source into a :class:`~brdffit.Measurement` (SPEC 1 conventions).
+    """Read any supported source into a :class:`~brdffit.Measurement` (docs/conventions.md#conventions conventions).
 
     ``format`` overrides the detection; ``options`` go to the reader (see each reader's ``read``):
     e.g. ``region=(r0, r1, c0, c1)``, ``includes_cos=True``, ``scale=`` for image folders, ``wi=, wo=``

@@ -8,7 +8,7 @@ wavelengths in nm, then per sample ``theta_i phi_i theta_o phi_o`` (radians) and
 Direction convention: pbrt-v2 builds ``wi = SphericalDirection(theta_i, phi_i)`` for "the incident
 illumination direction" and ``wo`` for "the measured reflection direction" with
 ``SphericalDirection(s, c, phi) = (s cos phi, s sin phi, c)``, i.e. the first pair is the light
-and phi is measured from +x in the same frame for both — SPEC 1's convention, taken as is. (The
+and phi is measured from +x in the same frame for both — docs/conventions.md#conventions's convention, taken as is. (The
 shared files have phi_i = 0 and the mirror peak at phi_o = +-180 deg.)
 
 Colour: each spectrum is integrated against the CIE 1931 2-degree observer (colour-science's

@@ -1,4 +1,4 @@
-"""UBO-81 tables as OpenEXR "BRDF images" (SPEC 3).
+"""UBO-81 tables as OpenEXR "BRDF images" (docs/formats.md#readers-and-writers).
 
 Layout: one 81 x 81 scan-line image, row = light index, column = view index (the UBO order of
 ``brdffit.grid``), FLOAT channels ``R, G, B`` (or ``Y`` for one channel) holding f_r in 1/sr, and a

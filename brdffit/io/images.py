@@ -1,4 +1,4 @@
-"""UBO / UTIA / Bonn BTF image folders (SPEC 3).
+"""UBO / UTIA / Bonn BTF image folders (docs/formats.md#readers-and-writers).
 
 A folder holds one image per (light, view) pair of the UBO-81 grid, named
 ``[prefix_]tlTTT_plPPP_tvTTT_pvPPP.{png,jpg,jpeg,exr}`` (integer degrees: theta/phi of the light,

@@ -1,4 +1,4 @@
-"""Resampling onto the UBO-81 grid (SPEC 3).
+"""Resampling onto the UBO-81 grid (docs/formats.md#readers-and-writers).
 
 - A source that can be evaluated anywhere (RGL ``.bsdf``, MERL ``.binary``, UTIA ``.bin``) is
   re-evaluated at the 6561 UBO pairs (that is what ``load`` does by default).

@@ -1,7 +1,7 @@
 """RGL-EPFL material database files (Dupuy & Jakob 2018), Mitsuba ``tensor_file`` ``.bsdf``.
 
 The data are evaluated through Mitsuba's own ``measured`` plugin, exactly as the authors intended,
-in the order Mitsuba renders them (SPEC 3; :func:`eval_measured`, through the lowest Mitsuba layer,
+in the order Mitsuba renders them (docs/formats.md#readers-and-writers; :func:`eval_measured`, through the lowest Mitsuba layer,
 :mod:`brdffit._mitsuba`, which imports Mitsuba when a file is first read)::
 
     f_r(light, view) = eval(si.wi = view, wo = light) / cos(theta_light)

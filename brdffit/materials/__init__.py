@@ -1,11 +1,11 @@
-"""A fit as a material other programs load (SPEC 8, 13): conversion to a native model, export.
+"""A fit as a material other programs load (docs/materials.md#a-fit-in-any-mitsuba-scene and docs/materials.md#native-materials-and-exports): conversion to a native model, export.
 
 - :func:`convert` fits a target model (a native one: ``mitsuba:*``, ``gltf:*``, ``blender:*``) to a
   fit's own BRDF on the UBO-81 grid and records the conversion error.
 - :func:`export` writes a fit as a file whose extension picks the format. The formats are modules
   of this package, each declaring its extensions, the models it holds and its writer
   (:mod:`.formats`, the registry): ``.xml`` a Mitsuba 3 scene-XML fragment (:mod:`.mitsuba_xml`: the
-  renderer's own plugin for a ``mitsuba:*`` fit, the ``brdffit`` plugin of SPEC 8 otherwise),
+  renderer's own plugin for a ``mitsuba:*`` fit, the ``brdffit`` plugin of docs/materials.md#a-fit-in-any-mitsuba-scene otherwise),
   ``.glb`` / ``.gltf`` a UV sphere carrying a ``gltf:*`` material (:mod:`.gltf`), ``.blend`` a sphere
   with a ``blender:*`` material, written by Blender in the worker of :mod:`brdffit.cycles`
   (:mod:`.blender`; needs ``.venv-blender``), ``.mtlx`` a MaterialX 1.39 document (:mod:`.materialx`:
@@ -33,7 +33,7 @@ from ._record import conversion_line, converted_from, native_of
 __all__ = ["check_format", "check_id", "conversion_line", "convert", "converted_from", "default_id", "describe",
            "export", "formats", "material_bytes", "native_of", "safe_id"]
 
-#: Metrics relative to the reference (SPEC 5): not a number against a reference that is 0 everywhere.
+#: Metrics relative to the reference (docs/fitting.md#fitting): not a number against a reference that is 0 everywhere.
 RELATIVE_METRICS = ("rel_rmse", "mean_rel_error")
 
 
@@ -42,7 +42,7 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     (every pair weighted 1, the fit's own loss unless ``loss`` is given), through the same
     ``brdffit.fit`` as any measurement. The returned FitResult's ``options["converted_from"]`` holds
     the source model and the conversion error: ``rel_rmse`` and ``log_rmse`` of the converted BRDF
-    against the source fit's on that grid (SPEC 5's definitions)."""
+    against the source fit's on that grid (docs/fitting.md#fitting's definitions)."""
     from .. import models
     from .._fit_defaults import LOSSES
     from ..fitting.driver import fit_measurements

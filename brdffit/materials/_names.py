@@ -1,4 +1,4 @@
-"""Names and text that go into material files (SPEC 13), one rule for every format.
+"""Names and text that go into material files (docs/materials.md#native-materials-and-exports), one rule for every format.
 
 - A material id is written as Mitsuba's ``<bsdf id>`` / ``<ref id>``, the glTF, Blender and
   MaterialX material name, and inside the XML comment that says how to use the file. The id a user

@@ -1,4 +1,4 @@
-"""What a material file records of the fit it holds, one rule for every format (SPEC 13): the line
+"""What a material file records of the fit it holds, one rule for every format (docs/materials.md#native-materials-and-exports): the line
 that says what the fit is (an XML comment, a MaterialX doc string), the ``brdffit`` record of its
 metrics and conversion (glTF ``extras``, a Blender custom property, a MaterialX attribute), and the
 native dictionary the renderer loads."""

@@ -1,4 +1,4 @@
-"""``.blend`` (SPEC 13): a UV sphere carrying a ``blender:*`` fit (``blender:principled``) as Blender's
+"""``.blend`` (docs/materials.md#native-materials-and-exports): a UV sphere carrying a ``blender:*`` fit (``blender:principled``) as Blender's
 own Principled BSDF, written by Blender itself in the worker process (:mod:`brdffit.cycles`).
 
 The file holds one smooth UV sphere (radius 1) with the material, a camera and a sun, and Cycles as

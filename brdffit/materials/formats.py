@@ -1,4 +1,4 @@
-"""The material formats, one module each (SPEC 13): what a file holds and how it is written.
+"""The material formats, one module each (docs/materials.md#native-materials-and-exports): what a file holds and how it is written.
 
 A module of this package that declares ``FORMAT`` (a :class:`Format`: one fit as a material file)
 or ``MAPS_FORMAT`` (a :class:`MapsFormat`: a BTF's parameter maps as a textured material) is a

@@ -1,4 +1,4 @@
-"""``.glb`` / ``.gltf`` (SPEC 13): a ``gltf:*`` fit as a glTF 2.0 asset, a UV sphere carrying the material.
+"""``.glb`` / ``.gltf`` (docs/materials.md#native-materials-and-exports): a ``gltf:*`` fit as a glTF 2.0 asset, a UV sphere carrying the material.
 
 Written with pygltflib (the Khronos-listed Python library for glTF 2.0). The asset holds one scene,
 one node, one mesh of one triangle primitive (POSITION, NORMAL, TEXCOORD_0, TANGENT, indices) and

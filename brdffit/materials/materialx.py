@@ -1,4 +1,4 @@
-"""``.mtlx`` (SPEC 13): a fit as a MaterialX 1.39 document, through the ``materialx`` package.
+"""``.mtlx`` (docs/materials.md#native-materials-and-exports): a fit as a MaterialX 1.39 document, through the ``materialx`` package.
 
 - ``gltf:metallic_roughness`` -> a ``gltf_pbr`` node (base_color, metallic, roughness: the glTF
   factors; the node's other inputs keep their defaults, the glTF core material's values).

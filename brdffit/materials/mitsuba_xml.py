@@ -1,4 +1,4 @@
-"""``.xml`` (SPEC 8, 13): a fit as a Mitsuba 3 scene-XML fragment, a plugin dictionary written as XML.
+"""``.xml`` (docs/materials.md#a-fit-in-any-mitsuba-scene and docs/materials.md#native-materials-and-exports): a fit as a Mitsuba 3 scene-XML fragment, a plugin dictionary written as XML.
 
 Mitsuba's XML and ``mi.load_dict`` describe the same objects: a plugin ``type`` and named
 properties. This writes the dictionary that ``mitsuba:*`` models return (the renderer's own
@@ -97,7 +97,7 @@ def plugin_dict(fit) -> dict:
         out["channels"] = int(fit.model.channels)
     for name, v in fit.model.check_params(fit.params).items():
         v = np.asarray(v, np.float64).reshape(-1)
-        if v.size not in (1, 3):  # pragma: no cover - parameters are 1 or 3 values (SPEC 4)
+        if v.size not in (1, 3):  # pragma: no cover - parameters are 1 or 3 values (docs/models.md#models)
             raise ValueError(f"{name}: {v.size} values")
         out[_key(name)] = float(v[0]) if v.size == 1 else {"type": "rgb", "value": [float(x) for x in v]}
     return out

@@ -1,4 +1,4 @@
-"""Fitted parameter maps (a per-texel BTF fit, SPEC 7) as a textured native material (SPEC 13).
+"""Fitted parameter maps (a per-texel BTF fit, docs/btf.md#btfs-per-texel-fitting) as a textured native material (docs/materials.md#native-materials-and-exports).
 
 ``ParameterMaps.export(path)`` and ``brdffit export PARAMS.exr -o FILE`` write the maps of a native
 model as the renderer's own material, each parameter map a texture, so that the BTF renders in

@@ -1,8 +1,8 @@
-"""The model library: ``names()``, ``get(name)``; one file per model (SPEC 4).
+"""The model library: ``names()``, ``get(name)``; one file per model (docs/models.md#models).
 
 A module in this package that defines ``MODEL`` is registered under ``MODEL.name`` (``_registry``:
 adding a model is one file and its tests). Native models
-(SPEC 13) are named ``renderer:bsdf`` and live in ``renderer_bsdf.py`` (``mitsuba:roughplastic`` in
+(docs/materials.md#native-materials-and-exports) are named ``renderer:bsdf`` and live in ``renderer_bsdf.py`` (``mitsuba:roughplastic`` in
 ``mitsuba_roughplastic.py``).
 ``get`` also accepts sums ("lambert+ggx+ggx", see ``compose``: names are case-insensitive and
 spaces are ignored) and multi-lobe Lafortune models (``get("lafortune", lobes=3)`` or

@@ -1,4 +1,4 @@
-"""Cycles' own building blocks, in JAX, for ``blender:principled`` (SPEC 13).
+"""Cycles' own building blocks, in JAX, for ``blender:principled`` (docs/materials.md#native-materials-and-exports).
 
 Each function reproduces a named piece of Blender 5's Cycles kernel (``intern/cycles/kernel/closure/
 bsdf_util.h``, ``bsdf_microfacet.h``, ``util/lookup_table.h``, ``app/cycles_precompute.cpp``), written

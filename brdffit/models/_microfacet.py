@@ -1,4 +1,4 @@
-"""The GGX (Trowbridge-Reitz) microfacet kit, written once for every model that uses it (SPEC 4).
+"""The GGX (Trowbridge-Reitz) microfacet kit, written once for every model that uses it (docs/models.md#models).
 
 B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refraction through Rough
 Surfaces", EGSR 2007 (the distribution, eq. 33, and its Smith G1, eq. 34); E. Heitz,

@@ -1,4 +1,4 @@
-"""Mitsuba 3's own building blocks, in JAX, for the ``mitsuba:*`` native models (SPEC 13).
+"""Mitsuba 3's own building blocks, in JAX, for the ``mitsuba:*`` native models (docs/materials.md#native-materials-and-exports).
 
 Each function reproduces a named piece of Mitsuba 3 (``include/mitsuba/render/fresnel.h``,
 ``microfacet.h``, ``src/bsdfs/roughplastic.cpp``) term for term, so that a native model equals the

@@ -1,5 +1,5 @@
 """The model files of this package, found by what they declare: a module that defines ``MODEL`` is
-registered under ``MODEL.name`` (SPEC 4). Adding a model, native ones included, is one file.
+registered under ``MODEL.name`` (docs/models.md#models). Adding a model, native ones included, is one file.
 
 Kept apart from the package's ``get``/``names`` (``brdffit.models``) so that :mod:`.base` can name
 the native models in a message without importing the package that imports it: this module imports
@@ -31,5 +31,5 @@ def discover() -> dict:
 
 
 def native_names() -> list[str]:
-    """The native models (a renderer's or format's own BSDF, named ``renderer:bsdf``; SPEC 13), sorted."""
+    """The native models (a renderer's or format's own BSDF, named ``renderer:bsdf``; docs/materials.md#native-materials-and-exports), sorted."""
     return sorted(name for name, model in discover().items() if model.is_native)

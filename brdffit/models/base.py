@@ -1,11 +1,11 @@
-"""What a model is: a declared parameter table plus a pure JAX formula (SPEC 4).
+"""What a model is: a declared parameter table plus a pure JAX formula (docs/models.md#models).
 
 A model file defines ``MODEL = Model(...)`` with its parameters, its formula and the paper it
 implements; the registry (``brdffit.models``) finds it. Parameter values travel as a dict
 ``name -> array of shape (size,)`` where ``size`` is 1, or the number of colour channels for a
 parameter declared with ``channels=3``.
 
-Bounds and physical ranges (SPEC 5, "Parameter space")
+Bounds and physical ranges (docs/fitting.md#parameter-space)
 ------------------------------------------------------
 Every parameter declares two ranges:
 
@@ -210,7 +210,7 @@ class Model:
     #: where the model has no specular lobe.
     #: Used to warn about lobes narrower than the sample spacing (``brdffit.fitting.space``).
     halfwidth: Callable[[Mapping[str, float]], float] | None = None
-    #: Native models only (SPEC 13): ``to_native(params) -> dict``, what the renderer or format
+    #: Native models only (docs/materials.md#native-materials-and-exports): ``to_native(params) -> dict``, what the renderer or format
     #: whose BSDF this formula reproduces loads, from checked parameters as float64 NumPy arrays of
     #: the declared sizes. None for brdffit's own models. See :meth:`native`.
     to_native: Callable[[Mapping[str, np.ndarray]], dict] | None = None
@@ -283,7 +283,7 @@ class Model:
             out[p.name] = v
         return out
 
-    # -- native models (SPEC 13) -------------------------------------------------------------------
+    # -- native models (docs/materials.md#native-materials-and-exports) -------------------------------------------------------------------
     @property
     def is_native(self) -> bool:
         """True for a model whose formula is a renderer's or format's own BSDF (``mitsuba:*``,
@@ -296,7 +296,7 @@ class Model:
         return self.name.split(":", 1)[0] if self.is_native else None
 
     def native(self, params: Params) -> dict:
-        """What the renderer loads for ``params`` (SPEC 13): for ``mitsuba:*`` a ``mi.load_dict``
+        """What the renderer loads for ``params`` (docs/materials.md#native-materials-and-exports): for ``mitsuba:*`` a ``mi.load_dict``
         dictionary of Mitsuba's own plugin, for ``gltf:*`` a glTF 2.0 material object. Raises
         ValueError for a model that is not native, or parameters outside the bounds (the ranges the
         renderer accepts)."""

@@ -1,4 +1,4 @@
-"""Blender 5's Principled BSDF as Cycles renders it (opaque, distribution GGX), as a native model (SPEC 13).
+"""Blender 5's Principled BSDF as Cycles renders it (opaque, distribution GGX), as a native model (docs/materials.md#native-materials-and-exports).
 
 Blender Foundation, Cycles (Blender 5.0), ``intern/cycles/kernel/svm/closure.h`` (the Principled
 BSDF's closures), ``kernel/closure/bsdf_microfacet.h`` and ``bsdf_util.h``; B. Walter et al.,

@@ -14,13 +14,13 @@ Naming scheme (what users and fit files address parameters by)
       ggx+blinn_phong     -> kd (ggx's), ggx1.ks, ..., blinn_phong1.ks, blinn_phong1.n
       lambert+ashikhmin_shirley -> kd, ashikhmin_shirley1.rd, ashikhmin_shirley1.rs, ...
 
-* A single model (no '+') is the model itself, with the SPEC 4 names.
+* A single model (no '+') is the model itself, with the docs/models.md#models names.
 
 The composite's formula is the sum of its components' formulas; it is reciprocal when every
 component is; a parameter stays ``linear`` in the sum when it was linear in its component (the
 components share no parameter but kd, which enters each sum term linearly).
 
-Lobe order (SPEC 5: no mirror-image twin)
+Lobe order (docs/fitting.md#fitting: no mirror-image twin)
 -----------------------------------------
 Lobes of one kind (the specular lobes of repeated components, ``ggx1`` and ``ggx2``; the lobes of
 a multi-lobe Lafortune model) are interchangeable: swapping all their parameters leaves f_r

@@ -31,7 +31,7 @@ BRDF form implemented (the modern normalisation)::
 The 1982 paper writes R_s = F D G / (pi (n.l)(n.v)) with D_1982 = exp(-tan^2/m^2) / (m^2 cos^4)
 = pi D: the same shape, 4 times larger (the modern 1/4 is the Jacobian of the half-vector map,
 Walter et al. 2007), so ks_1982 = ks / 4 with alpha = m. Cook and Torrance used the full Fresnel
-equations; Schlick's approximation (SPEC 4) replaces them. Lecture form: the specular term of the
+equations; Schlick's approximation (docs/models.md#models) replaces them. Lecture form: the specular term of the
 lecture's ambient + diffuse + specular sum, I_s = I_L (n.l) ks F G D / (4 (n.l)(n.v)).
 D is evaluated in log space so that alpha = 1e-4 and grazing half vectors stay finite in float32;
 cosines are clamped at 1e-7 at the horizon. Reciprocal.

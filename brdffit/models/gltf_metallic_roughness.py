@@ -1,4 +1,4 @@
-"""The glTF 2.0 core metallic-roughness material, as a native model (SPEC 13).
+"""The glTF 2.0 core metallic-roughness material, as a native model (docs/materials.md#native-materials-and-exports).
 
 The Khronos Group, "glTF 2.0 Specification", Appendix B "BRDF Implementation" (2021): GGX
 (Trowbridge & Reitz 1975) with the height-correlated Smith masking-shadowing (Heitz 2014) and

@@ -32,7 +32,7 @@ Several lobes: ``get("lafortune", lobes=3)`` or ``get("lafortune3")`` is the mod
 ``lafortune3`` with parameters kd, rho1, cx1, cz1, n1, rho2, cx2, cz2, n2, rho3, ... (lobe j's
 parameters carry the suffix j; default exponents ..., 2000, 200, 20, a decade apart so that the
 lobes start distinct, the narrowest first as ``compose`` orders lobes); ``lafortune`` itself is
-one lobe with the SPEC names. Composition ("lambert+lafortune+lafortune") also works and names
+one lobe with the names of docs/models.md#models. Composition ("lambert+lafortune+lafortune") also works and names
 lobes lafortune1.rho, lafortune2.rho, ...
 
 With cx = -1, cz = 1 a lobe is Phong's (r.v)^n, the lecture's specular term without its 1/(n.l)
@@ -64,7 +64,7 @@ KD = Param("kd", 3, 0.0, INF, 0.1, "albedo", linear=True, doc="diffuse albedo", 
 #: The default start's values of (cx, cz): lobe directions (mirror cx = -cz with its peak value 1,
 #: grazing-forward, towards the normal, retro-reflective). The length of C trades against rho, so the
 #: box's far corners add no direction; there |C|^n reaches the formula's cap at the grid's
-#: exponents, where the solver finds no gradient (issue 28: a noise-free mirror lobe, n 50, was
+#: exponents, where the solver finds no gradient (docs/fitting.md#hostile-but-valid-data: a noise-free mirror lobe, n 50, was
 #: started at (-1.84, 1.92), n 160, and stopped there at rel_rmse 0.087).
 C_GRID = ((-1.0, -0.5, 0.0, 0.5, 1.0), (0.7, 1.0))
 

@@ -1,4 +1,4 @@
-"""Mitsuba 3's ``principled`` plugin (the Disney BSDF), reflection only, as a native model (SPEC 13).
+"""Mitsuba 3's ``principled`` plugin (the Disney BSDF), reflection only, as a native model (docs/materials.md#native-materials-and-exports).
 
 W. Jakob et al., Mitsuba 3 renderer, ``src/bsdfs/principled.cpp`` and ``principledhelpers.h``
 (2022-); B. Burley, "Physically Based Shading at Disney", SIGGRAPH 2012 course notes; B. Burley,

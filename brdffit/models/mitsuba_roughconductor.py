@@ -1,4 +1,4 @@
-"""Mitsuba 3's ``roughconductor`` plugin (GGX), as a native model (SPEC 13).
+"""Mitsuba 3's ``roughconductor`` plugin (GGX), as a native model (docs/materials.md#native-materials-and-exports).
 
 W. Jakob et al., Mitsuba 3 renderer, ``src/bsdfs/roughconductor.cpp`` (2022-); B. Walter,
 S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refraction through Rough Surfaces",
@@ -24,7 +24,7 @@ default distribution is Beckmann (9.6 % off GGX at alpha 0.3), so ``distribution
 variants integrate back to the fitted RGB values exactly and whose Fresnel reflectance, in its
 spectral variants, has the fitted RGB colour at every angle (``brdffit.models._spectra``; RGB values
 would be upsampled channel by channel and clipped to [0, 1] there: a purple fit rendered olive).
-``specular_reflectance`` is not fitted and keeps the plugin's default, 1 (SPEC 13): the complex IOR
+``specular_reflectance`` is not fitted and keeps the plugin's default, 1 (docs/materials.md#native-materials-and-exports): the complex IOR
 alone spans every reflectance curve a scale would, and a scale beside it leaves the fit a flat
 direction (s F(eta, k) = s' F(eta', k') along a curve; measured: no 2 % recovery of eta, k or s, and
 a lm run that ended worse than its start).

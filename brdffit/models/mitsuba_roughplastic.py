@@ -1,4 +1,4 @@
-"""Mitsuba 3's ``roughplastic`` plugin (GGX), as a native model (SPEC 13).
+"""Mitsuba 3's ``roughplastic`` plugin (GGX), as a native model (docs/materials.md#native-materials-and-exports).
 
 W. Jakob et al., Mitsuba 3 renderer, ``src/bsdfs/roughplastic.cpp`` (2022-); B. Walter,
 S. R. Marschner, H. Li, K. E. Torrance, "Microfacet Models for Refraction through Rough Surfaces",

@@ -23,7 +23,7 @@ ks with m and is no box; 1e5 is that limit at m = 1.8e-3 (a lobe 0.3 degrees wid
 maximum, far below what any sample spacing resolves: ``fit`` warns about such lobes), so a
 larger ks is not plausible.
 
-Formula (SPEC 4, the paper's form)::
+Formula (docs/models.md#models, the paper's form)::
 
     f_r = kd/pi + ks F(h.l) G D / (4 (n.l)(n.v))
     D = exp(-(th_h / m)^2)            th_h = angle between h and n (the paper's alpha), radians

@@ -1,4 +1,4 @@
-"""Every figure brdffit makes (SPEC 9), as matplotlib ``Figure`` objects.
+"""Every figure brdffit makes (docs/validation.md#figures), as matplotlib ``Figure`` objects.
 
 The figures are built without ``matplotlib.pyplot``: no global figure registry, and the caller's
 backend is never changed (nothing here calls ``matplotlib.use``). A returned figure shows itself
@@ -10,7 +10,7 @@ in Jupyter (it has ``_repr_png_``) and is written with ``fig.savefig(path)``.
 - :func:`spheres`: tone-mapped sphere renders (one per light), one exposure for all.
 - :func:`sphere_panel`: one light of a validation: reference | fit | signed error per channel.
 - :func:`scatter`: fitted against measured values per channel (scattered, non-grid data).
-- :func:`usage`: where a scene looks at a material (SPEC 12); :func:`scene_panel`: a scene rendered with the
+- :func:`usage`: where a scene looks at a material (docs/scene.md#scene-aware-fitting); :func:`scene_panel`: a scene rendered with the
   reference | with the fit | FLIP map.
 - :func:`pareto`: error against run time of a :class:`~brdffit.fitting.compare.Report`.
 - :func:`fit_figure`: the figure ``brdffit fit`` writes; :func:`fit_figure_data` makes its content
@@ -21,14 +21,14 @@ in Jupyter (it has ``_repr_png_``) and is written with ``fig.savefig(path)``.
 Conventions shared by the figures
 ---------------------------------
 - 81x81 displays: rows are light directions, columns view directions, ordered by theta then phi
-  (SPEC 1); ticks mark every theta ring (0, 15, ..., 75 degrees) at its centre, thin lines
+  (docs/conventions.md#conventions); ticks mark every theta ring (0, 15, ..., 75 degrees) at its centre, thin lines
   between rings, the same on every 81x81 display.
 - Values are f_r in 1/sr (never f_r cos). Tables are shown on a log scale per channel whose range
   comes from the measured data (1st percentile of its positive values to its maximum); the colour
   bar gives that range.
 - Samples a fit leaves out (weight 0, non-finite, below the horizon) are drawn in magenta, with a
   legend entry and their count.
-- Errors are the log residual that ``log_rmse`` is the RMS of (SPEC 5):
+- Errors are the log residual that ``log_rmse`` is the RMS of (docs/fitting.md#fitting):
   ln(1 + f_fit cos th_l) - ln(1 + f_meas cos th_l), per channel, on a diverging scale whose
   symmetric range comes from the data (99.5th percentile of its magnitude).
 

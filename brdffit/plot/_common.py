@@ -87,7 +87,7 @@ def _log_rgb(values: np.ndarray, valid: np.ndarray, lo: float, hi: float) -> np.
 
 
 def log_residual(fitted, measured, cos_light):
-    """ln(1 + f cos th_l) - ln(1 + f_ref cos th_l): the residual of the ``log`` loss (SPEC 5)."""
+    """ln(1 + f cos th_l) - ln(1 + f_ref cos th_l): the residual of the ``log`` loss (docs/fitting.md#fitting)."""
     from ..fitting.losses import log_residual as _lr
 
     return np.asarray(_lr(np.asarray(fitted, np.float64), np.asarray(measured, np.float64), cos_light))

@@ -13,7 +13,7 @@ if TYPE_CHECKING:
 # -- error against run time --------------------------------------------------------------------------
 def pareto(report, metric: str = "loss_log") -> Figure:
     """Error (``metric``) against run time, log axes: colour = model, marker = solver; the rows of
-    ``report.pareto(metric)`` are labelled and joined (ties keep the fastest, SPEC 5)."""
+    ``report.pareto(metric)`` are labelled and joined (ties keep the fastest, docs/fitting.md#fitting)."""
     import matplotlib
     from matplotlib.lines import Line2D
 

@@ -177,7 +177,7 @@ def slices(measurement=None, fit=None, *, theta_light: float = np.radians(45.0),
            tolerance_deg: float = 1.0) -> Figure:
     """In-plane and cross-plane polar lobes of f_r (1/sr) per channel for one light direction.
 
-    ``theta_light``, ``phi_light``: radians (SPEC 1). The light is the measured incident direction
+    ``theta_light``, ``phi_light``: radians (docs/conventions.md#conventions). The light is the measured incident direction
     nearest to the one asked for. Row 1, the plane of incidence: the signed view angle is positive
     on the mirror side. Row 2, the plane through the normal perpendicular to it: positive towards
     phi_light + 90 degrees. Measured samples within ``tolerance_deg`` of a plane are dots; the fit is

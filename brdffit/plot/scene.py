@@ -1,4 +1,4 @@
-"""Scene-aware fitting (SPEC 12): :func:`usage` (where a scene looks at a material) and
+"""Scene-aware fitting (docs/scene.md#scene-aware-fitting): :func:`usage` (where a scene looks at a material) and
 :func:`scene_panel` (a scene rendered with the reference | with the fit | FLIP map)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import numpy as np
 from ._common import new_figure
 
 
-# -- scene-aware fitting (SPEC 12) -----------------------------------------------------------------
+# -- scene-aware fitting (docs/scene.md#scene-aware-fitting) -----------------------------------------------------------------
 def _usage_density(fig, ax, x, y, weight, labels: tuple[str, str], title: str) -> None:
     """A weighted 2-D histogram of two angles in degrees (0..90, 2-degree bins), relative to its
     maximum, on a log colour scale from 1e-3."""

@@ -1,7 +1,7 @@
-"""Validation rendering in Mitsuba 3 (SPEC 6): spheres under a sweep of lights, panels, metrics.
+"""Validation rendering in Mitsuba 3 (docs/validation.md#validation-rendering): spheres under a sweep of lights, panels, metrics.
 
-``render_sphere(source, lights, size, irradiance)`` renders one image per light with the SPEC
-framing; ``validate(source, fit, ...)`` renders a fit and its reference side by side and writes
+``render_sphere(source, lights, size, irradiance)`` renders one image per light with the
+framing of docs/validation.md#validation-rendering; ``validate(source, fit, ...)`` renders a fit and its reference side by side and writes
 EXRs, PNG panels and metrics. Mitsuba is imported only in this package (through
 ``brdffit._mitsuba.mitsuba()``).
 """

@@ -1,6 +1,6 @@
 """BRDF sources as Mitsuba BSDFs, with one definition per formula.
 
-Three kinds of source (SPEC 6):
+Three kinds of source (docs/validation.md#validation-rendering):
 
 - an analytic model (a FitResult, or a ``(model_name, params)`` pair): the very BSDF a user gets
   from ``fit.to_mitsuba()`` (:func:`brdffit.render.export.model_bsdf`): Mitsuba's own plugin for a
@@ -16,7 +16,7 @@ the kernel up to the call, hands the Python method concrete arrays holding only 
 reached this BSDF, and the method may leave Dr.Jit (to NumPy) and come back. In the ``scalar_rgb``
 fallback every sample calls the method with scalars: correct, but slow.
 
-Conventions at the boundary (SPEC 1): in Mitsuba's ``eval(ctx, si, wo)``, ``si.wi`` points to the
+Conventions at the boundary (docs/conventions.md#conventions): in Mitsuba's ``eval(ctx, si, wo)``, ``si.wi`` points to the
 camera (our ``wo``, the view) and ``wo`` points to the light (our ``wi``), both in the local
 shading frame; Mitsuba's ``eval`` returns f_r * cos(theta_light). The callback here and the symbolic
 BSDF (:mod:`brdffit.render.symbolic_bsdf`) are the only places that convert between the two.
@@ -116,7 +116,7 @@ def _callback_class(variant: str):
                 # for a render that runs symbolically: a scene that holds this BSDF renders inside
                 # evaluated_calls() and never gets here, so no ray of this one reaches these lanes.
                 return dr.zeros(mi.Color3f, max(dr.width(wo), dr.width(si.wi)))
-            # Mitsuba: si.wi = view, wo = light. SPEC: f_r(light, view) * cos(theta_light).
+            # Mitsuba: si.wi = view, wo = light. docs/conventions.md#conventions: f_r(light, view) * cos(theta_light).
             if scalar:
                 light = np.array([[wo.x, wo.y, wo.z]], np.float64)
                 view = np.array([[si.wi.x, si.wi.y, si.wi.z]], np.float64)

@@ -1,4 +1,4 @@
-"""The second renderer of a validation: Blender's Cycles (SPEC 13), same framing as SPEC 6.
+"""The second renderer of a validation: Blender's Cycles (docs/materials.md#native-materials-and-exports), same framing as docs/validation.md#validation-rendering.
 
 ``render_sphere(..., renderer="cycles")`` renders a ``blender:principled`` fit with Blender's own
 Principled BSDF (the fit's ``native()`` dict, distribution GGX) through the Blender worker

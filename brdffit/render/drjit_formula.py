@@ -1,4 +1,4 @@
-"""One definition, two tracers: a model's JAX formula as straight-line code for Dr.Jit or Python floats (SPEC 8).
+"""One definition, two tracers: a model's JAX formula as straight-line code for Dr.Jit or Python floats (docs/materials.md#a-fit-in-any-mitsuba-scene).
 
 The ``brdffit`` plugin must render a fit in any Mitsuba scene and variant: where Dr.Jit records calls
 symbolically (the JIT variants' default: no way back to Python or JAX per lane) and where Mitsuba calls
@@ -278,7 +278,7 @@ def _run(w: _Writer, jaxpr, consts, args: list[_Value]) -> list[_Value]:
 class DrjitFormula:
     """``model.eval`` for ``channels`` channels (the model's own by default) as a function of cells:
     ``__call__(params, wi, wo)`` with ``params`` mapping each parameter name to a list of its cells
-    (Dr.Jit arrays or numbers, its ``size``), ``wi``/``wo`` triples (the light and the view, SPEC 1),
+    (Dr.Jit arrays or numbers, its ``size``), ``wi``/``wo`` triples (the light and the view, docs/conventions.md#conventions),
     returns the ``channels`` cells of f_r (Dr.Jit back end); :meth:`scalar` is the same program on
     Python floats. Raises ``Unsupported`` on construction where the formula cannot be translated."""
 

@@ -1,12 +1,12 @@
-"""A fit in any Mitsuba 3 scene (SPEC 8): the ``brdffit`` BSDF plugin and its dict (its XML file is
+"""A fit in any Mitsuba 3 scene (docs/materials.md#a-fit-in-any-mitsuba-scene): the ``brdffit`` BSDF plugin and its dict (its XML file is
 written by :mod:`brdffit.materials.mitsuba_xml`, with every material format).
 
 The plugin is the symbolic BSDF of :mod:`brdffit.render.symbolic_bsdf`: ``eval`` is the JAX
 ``model.eval`` the fit was made with, translated for Dr.Jit and for Python floats (one definition of
 the formula, two tracers), ``sample``/``pdf`` the lobe mixture of :mod:`brdffit.render.sampling`; it
 renders in every variant (RGB, spectral, mono, polarized; scalar and JIT) and mode. A ``mitsuba:*``
-model is Mitsuba's own plugin (SPEC 13), also when named in a ``brdffit`` plugin. Its properties are the model name and the parameters, each under
-its SPEC name with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` -> ``ggx1_ks``), each
+model is Mitsuba's own plugin (docs/materials.md#native-materials-and-exports), also when named in a ``brdffit`` plugin. Its properties are the model name and the parameters, each under
+its parameter name (docs/models.md#models) with ``.`` written ``_`` (Mitsuba reserves the dot: ``ggx1.ks`` -> ``ggx1_ks``), each
 a number, an RGB triple, a spectrum or a nested texture, as Mitsuba's own plugins take them::
 
     <bsdf type="brdffit" id="paint">
@@ -95,7 +95,7 @@ def _plugin(props):
 
 def model_bsdf(model, params, props=None):
     """The one Mitsuba BSDF of an analytic model, for validation and for users alike: Mitsuba's own
-    plugin for a ``mitsuba:*`` model (SPEC 13), otherwise the symbolic BSDF of
+    plugin for a ``mitsuba:*`` model (docs/materials.md#native-materials-and-exports), otherwise the symbolic BSDF of
     :mod:`brdffit.render.symbolic_bsdf` -- the model's formula translated, in any variant and mode.
     ``params`` maps each parameter to its values or a ``symbolic_bsdf.Texture``; the sampling
     mixture follows the textures' mean values."""
@@ -201,7 +201,7 @@ def mitsuba_bsdf(model_or_fit, params=None):
     if not hasattr(model_or_fit, "params") and _is_map(params):
         return map_bsdf(model_or_fit, params)
     model, values = _model_and_params(model_or_fit, params)
-    if model.target == "mitsuba":  # a native fit is Mitsuba's own plugin (SPEC 8, 13)
+    if model.target == "mitsuba":  # a native fit is Mitsuba's own plugin (docs/materials.md#a-fit-in-any-mitsuba-scene and docs/materials.md#native-materials-and-exports)
         return model.native(values)
     register_mitsuba()
     out: dict = {"type": PLUGIN, "model": model.name}

@@ -1,4 +1,4 @@
-"""RGL-EPFL measured data (Dupuy & Jakob 2018) in Mitsuba's own ``measured`` plugin (SPEC 3): the
+"""RGL-EPFL measured data (Dupuy & Jakob 2018) in Mitsuba's own ``measured`` plugin (docs/formats.md#readers-and-writers): the
 reader holds the one door to the plugin (:func:`brdffit.io.rgl.load_measured`) and its evaluation
 (:func:`brdffit.io.rgl.eval_measured`), through the lowest Mitsuba layer; importable from here,
 where the renderer's modules look for them."""

@@ -1,4 +1,4 @@
-"""Image and table metrics of a validation (SPEC 6): RMSE, relative RMSE, PSNR, FLIP.
+"""Image and table metrics of a validation (docs/validation.md#validation-rendering): RMSE, relative RMSE, PSNR, FLIP.
 
 - ``rmse``: root mean square difference of the linear radiance over the pixels on the disc (all
   channels), in the units of the render (radiance per unit irradiance times ``irradiance``).
@@ -75,7 +75,7 @@ def image_metrics(
     }
     if not (np.all(np.isfinite(ref[m])) and np.all(np.isfinite(tst[m]))):
         # The tone mapper clips inf and NaN to displayable values, so PSNR and FLIP would read as a
-        # perfect match of images that hold no numbers (issue 28): none of them can be computed.
+        # perfect match of images that hold no numbers (docs/fitting.md#hostile-but-valid-data): none of them can be computed.
         out.update(rmse=float("nan"), rel_rmse=float("nan"), psnr=float("nan"), flip=float("nan"),
                    _mse_tonemapped=float("nan"))
     return out
@@ -106,7 +106,7 @@ def format_metric(value: float, spec: str) -> str:
 
 def table_metrics(reference: np.ndarray, fitted: np.ndarray, valid: np.ndarray) -> dict[str, float]:
     """Errors of the fitted 81x81 table against the reference on the valid entries (f_r, 1/sr);
-    ``log_rmse`` is the one definition of SPEC 5 (:func:`brdffit.fitting.losses.log_rmse`, with the
+    ``log_rmse`` is the one definition of docs/fitting.md#fitting (:func:`brdffit.fitting.losses.log_rmse`, with the
     UBO-81 light's cos theta), the figure a fit reports."""
     from ..fitting.losses import log_rmse
     from ..grid import ubo_directions

@@ -1,4 +1,4 @@
-"""The validation scene and ``render_sphere`` (SPEC 6: framing is normative).
+"""The validation scene and ``render_sphere`` (docs/validation.md#validation-rendering: framing is normative).
 
 The scene holds only what a comparison needs: the unit sphere with the BSDF, an orthographic
 camera on +z looking down -z with +y up whose film covers exactly [-1, 1]^2 (the sphere fills the
@@ -40,7 +40,7 @@ DEFAULT_SPP = 4
 def light_directions(lights) -> Float[np.ndarray, "L 3"]:
     """Unit world directions (L, 3) towards the lights, from directions (L, 3) or (theta, phi) (L, 2).
 
-    Angles are radians, theta from +z, phi from +x counter-clockwise seen from +z (SPEC 1).
+    Angles are radians, theta from +z, phi from +x counter-clockwise seen from +z (docs/conventions.md#conventions).
     """
     from ..errors import UsageError
 
@@ -74,7 +74,7 @@ def light_directions(lights) -> Float[np.ndarray, "L 3"]:
 
 
 def pixel_centres(size: int) -> tuple[np.ndarray, np.ndarray]:
-    """World (x, y) of the pixel centres, each (size, size), in the SPEC framing."""
+    """World (x, y) of the pixel centres, each (size, size), in the framing of docs/validation.md#validation-rendering."""
     c = (np.arange(size) + 0.5) * (2.0 / size) - 1.0
     return np.meshgrid(c, -c)
 
@@ -146,7 +146,7 @@ def render_sphere(
     progress=None,
     renderer: str = "mitsuba",
 ) -> Float[np.ndarray, "L size size 3"]:
-    """Linear radiance of the unit sphere under each light, (L, size, size, 3) float32 (SPEC 6).
+    """Linear radiance of the unit sphere under each light, (L, size, size, 3) float32 (docs/validation.md#validation-rendering).
 
     ``source``: a FitResult, a ``(model_name, params)`` pair, a UBO-81 Measurement, or a path to an
     RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the

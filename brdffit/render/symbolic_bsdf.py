@@ -1,4 +1,4 @@
-"""The ``brdffit`` plugin's BSDF: an analytic model's own formula, rendered by Mitsuba in any variant (SPEC 8).
+"""The ``brdffit`` plugin's BSDF: an analytic model's own formula, rendered by Mitsuba in any variant (docs/materials.md#a-fit-in-any-mitsuba-scene).
 
 ``eval`` runs the model's JAX formula translated to straight-line code (:mod:`brdffit.render.drjit_formula`):
 on Dr.Jit arrays in the JIT variants -- Mitsuba's default symbolic mode, no
@@ -22,7 +22,7 @@ Parameters. Each parameter is a number (or RGB triple) or a Mitsuba texture (par
 upsampling coefficients in spectral variants, the luminance in mono), a texture's own keys below it
 (``kd.data``).
 
-Conventions at the boundary (SPEC 1): in Mitsuba's ``eval(ctx, si, wo)`` ``si.wi`` points to the
+Conventions at the boundary (docs/conventions.md#conventions): in Mitsuba's ``eval(ctx, si, wo)`` ``si.wi`` points to the
 camera (our ``wo``) and ``wo`` to the light (our ``wi``); Mitsuba's ``eval`` returns f_r cos(theta_light).
 """
 

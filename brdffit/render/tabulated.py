@@ -1,4 +1,4 @@
-"""A BRDF that interpolates a UBO-81 table (SPEC 1 grid), for rendering measured references.
+"""A BRDF that interpolates a UBO-81 table (docs/conventions.md#conventions grid), for rendering measured references.
 
 Interpolation scheme (4-D multilinear on the rings)
 ---------------------------------------------------

@@ -1,4 +1,4 @@
-"""``brdffit.validate``: a fit against its reference, rendered under a sweep of lights (SPEC 6).
+"""``brdffit.validate``: a fit against its reference, rendered under a sweep of lights (docs/validation.md#validation-rendering).
 
 Written files (in ``out``, atomically: the folder appears complete or not at all):
 
@@ -133,7 +133,7 @@ def validate(
     ``out``: folder to write (see the module docstring); nothing is written when None.
     ``progress(stage, k, n)`` is called as the work goes on.
     ``renderer``: what renders the fit, "mitsuba" or "cycles" (a ``blender:principled`` fit in
-    Blender's Cycles, SPEC 13); the reference is always rendered by Mitsuba.
+    Blender's Cycles, docs/materials.md#native-materials-and-exports); the reference is always rendered by Mitsuba.
     """
     from .cycles import check_renderer, cycles_material
 

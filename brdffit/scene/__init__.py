@@ -1,4 +1,4 @@
-"""Scene-aware fitting (SPEC 12): where a user's Mitsuba 3 scene looks at a material, fit weights
+"""Scene-aware fitting (docs/scene.md#scene-aware-fitting): where a user's Mitsuba 3 scene looks at a material, fit weights
 from it, and the scene rendered with a fit beside it rendered with the reference."""
 
 from __future__ import annotations

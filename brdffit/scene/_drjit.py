@@ -1,4 +1,4 @@
-"""Dr.Jit handling for scene renders with a Python BSDF (issue 12), on the one mechanism of
+"""Dr.Jit handling for scene renders with a Python BSDF (docs/scene.md#scene-aware-fitting), on the one mechanism of
 ``brdffit._mitsuba.evaluated_calls`` (symbolic calls and loops off while brdffit's Python BSDFs
 are called; they return zeros when traced symbolically, so other scenes render in symbolic mode
 whatever brdffit BSDFs exist).

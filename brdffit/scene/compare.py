@@ -1,4 +1,4 @@
-"""Scene-weighted against plain fits, judged in the scene and on the sphere validation (issue 12's
+"""Scene-weighted against plain fits, judged in the scene and on the sphere validation (docs/scene.md#scene-aware-fitting's
 "must show"; used by benchmarks/bench_scene.py and tests/test_scene_rgl.py)."""
 
 from __future__ import annotations

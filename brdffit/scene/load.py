@@ -46,7 +46,7 @@ def load_scene(scene, material: str) -> LoadedScene:
     from ..render.export import register_mitsuba
 
     mi = mitsuba()
-    register_mitsuba()  # a scene may hold a fit exported as <bsdf type="brdffit"> (SPEC 8)
+    register_mitsuba()  # a scene may hold a fit exported as <bsdf type="brdffit"> (docs/materials.md#a-fit-in-any-mitsuba-scene)
     name = scene_name(scene)
     if isinstance(scene, (str, Path)):
         path = Path(scene)

@@ -1,4 +1,4 @@
-"""``brdffit.render_scene`` and ``brdffit.validate_scene``: a user's scene with its material replaced (SPEC 12).
+"""``brdffit.render_scene`` and ``brdffit.validate_scene``: a user's scene with its material replaced (docs/scene.md#scene-aware-fitting).
 
 The scene renders with its own sensor, integrator and lights; only the BSDF with id ``material``
 is replaced, by the same BSDF builders as the sphere validation (:mod:`brdffit.render.bsdf`): a

@@ -1,4 +1,4 @@
-"""``brdffit.scene_usage``: where a scene looks at a material, and how much each look matters (SPEC 12).
+"""``brdffit.scene_usage``: where a scene looks at a material, and how much each look matters (docs/scene.md#scene-aware-fitting).
 
 How the pairs and their contributions are recorded
 --------------------------------------------------
@@ -25,7 +25,7 @@ material is the scene's own BSDF (or ``source``, when given), so the recorded di
 those of the real render. Depth follows the scene's integrator: ``path`` uses its ``max_depth``
 (-1 is capped at :data:`MAX_DEPTH_CAP`), ``direct`` is depth 2, other integrators depth 3.
 
-Frames (SPEC 1): Mitsuba's ``si.wi`` points towards where the path came from, i.e. to the
+Frames (docs/conventions.md#conventions): Mitsuba's ``si.wi`` points towards where the path came from, i.e. to the
 viewer side: it becomes ``wo``; the direction towards the light (emitter sample, or the
 sampled continuation) becomes ``wi``. A back-face hit of a two-sided material is mirrored to
 the front (both z negated, as Mitsuba's ``twosided`` does).
@@ -113,7 +113,7 @@ class Usage:
     """The (light, view) pairs at which a scene evaluates a material, with their contributions.
 
     ``wi`` (K, 3) towards the light, ``wo`` (K, 3) towards the viewer, local frame of the
-    material (SPEC 1); ``weight`` (K,) the luminance each pair adds to the image (see the
+    material (docs/conventions.md#conventions); ``weight`` (K,) the luminance each pair adds to the image (see the
     module docstring); ``emitter_sampled`` (K,) True for emitter samples, False for sampled
     directions. ``pixels``, ``spp``, ``max_depth``, ``seconds``: how it was rendered.
     """
@@ -363,7 +363,7 @@ def _trace(scene, target, spp: int, seed: int, max_depth: int):
 
 
 def scene_usage(scene, material: str, *, spp: int = 16, seed: int = 0, source=None, max_depth: int | None = None) -> Usage:
-    """Render ``scene`` once and record where it looks at the BSDF with id ``material`` (SPEC 12).
+    """Render ``scene`` once and record where it looks at the BSDF with id ``material`` (docs/scene.md#scene-aware-fitting).
 
     ``scene``: a Mitsuba 3 XML path, a scene dict or an ``mi.Scene``. ``spp``: paths per pixel.
     ``source``: render the material as this BRDF instead of the scene's own (a FitResult, a
