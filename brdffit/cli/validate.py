@@ -1,4 +1,4 @@
-"""``brdffit validate SOURCE FIT.json [-o DIR] [--renderer cycles]``: renders, panels, metrics (docs/validation.md#validation-rendering, docs/btf.md#btfs-per-texel-fitting, docs/materials.md#native-materials-and-exports)."""
+"""``brdffit validate SOURCE FIT.json [-o DIR] [--renderer cycles]``: renders, panels, metrics (docs/validation.md#validation-rendering, docs/cli.md#the-command-line-and-set-up, docs/validation.md#a-second-renderer-cycles)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from . import cli
-from ._help import DefaultFrom
+from ._help import DefaultFrom, HelpFrom
 
 
 def _since_process_start() -> float | None:
@@ -35,9 +35,9 @@ def _since_process_start() -> float | None:
 @click.option("--size", type=click.IntRange(8, 4096), default=256, show_default=True, help="Image size in pixels.")
 @click.option("--spp", type=click.IntRange(1, 1024), default=None, cls=DefaultFrom,
               default_from="brdffit.render.scene:DEFAULT_SPP", help="Samples per pixel.")
-@click.option("--renderer", type=click.Choice(["mitsuba", "cycles"]), default="mitsuba", show_default=True,
-              help="What renders the fit: Mitsuba, or Blender's Cycles (a blender:principled fit; needs "
-                   ".venv-blender). The reference is always rendered by Mitsuba.")
+@click.option("--renderer", default=None, cls=HelpFrom, help_from=("brdffit.render.renderers:choices",),
+              help="What renders the fit, one of {} (Cycles: a blender:principled fit; needs .venv-blender). "
+                   "The reference is always rendered by Mitsuba.")
 def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lights: int, size: int, spp: int | None,
                  renderer: str) -> int:
     """Render the fit in FIT.json and the reference SOURCE on spheres under a light sweep; write
@@ -66,10 +66,10 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
 
         # FIT.json is a fit file whatever its name: checked as one (not guessed as a measurement)
         fit = as_fit(FitResult.from_json(Path(fit_json)))  # the small file first: a bad one costs nothing
-        if renderer == "cycles":
-            from ..render.cycles import cycles_material
+        from ..render.renderers import get as get_renderer, names
 
-            cycles_material(fit)  # a fit Cycles cannot render: one line, before reading the reference
+        chosen = get_renderer(renderer or names()[0])  # a name it does not know: one line
+        chosen.check(fit)  # a fit it cannot render: one line, before reading the reference
         reference = as_source(source)
 
         t_import = time.perf_counter() - t0
@@ -83,7 +83,7 @@ def validate_cmd(source: str, fit_json: str, out: str | None, force: bool, n_lig
                     bar.update(tasks[stage], completed=k, total=n)
 
             v = validate(reference, fit, lights=default_lights(n_lights), size=size, out=out_path, force=force,
-                         spp=spp or DEFAULT_SPP, progress=progress, renderer=renderer)
+                         spp=spp or DEFAULT_SPP, progress=progress, renderer=chosen)
     from ..render.metrics import format_metric as fm
 
     o = v.metrics["overall"]

@@ -190,7 +190,7 @@ class Explorer(anywidget.AnyWidget):
     def render(self, size: int = 128, spp: int = 16):
         """Mitsuba renders (``brdffit.render_sphere``) of the measured table and of the model under
         the light, shown instead of the preview until the next change; returns (measured, model)."""
-        from ..render.scene import render_sphere
+        from ..render.renderers import render_sphere
 
         light = [np.radians(self.light)]
         measured = render_sphere(self._table.measurement, light, size=size, spp=spp)[0]

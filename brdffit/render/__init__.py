@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from .. import _x64  # noqa: F401 - float64 before any JAX work (brdffit/_x64.py)
 from .bsdf import Source, as_source
-from .scene import render_sphere
+from .renderers import render_sphere
 from .validate import Validation, default_lights, validate
 
 __all__ = ["Source", "Validation", "as_source", "default_lights", "render_sphere", "validate"]

@@ -1,6 +1,6 @@
 """The second renderer of a validation: Blender's Cycles (docs/materials.md#native-materials-and-exports), same framing as docs/validation.md#validation-rendering.
 
-``render_sphere(..., renderer="cycles")`` renders a ``blender:principled`` fit with Blender's own
+``render_sphere(..., renderer="cycles")`` (the registry: :mod:`brdffit.render.renderers`) renders a ``blender:principled`` fit with Blender's own
 Principled BSDF (the fit's ``native()`` dict, distribution GGX) through the Blender worker
 (:mod:`brdffit.cycles`): the unit sphere (an exact sphere, Cycles' point primitive), the orthographic
 camera on +z, one sun of angle 0 per light, direct light only, a box pixel filter, linear radiance.
@@ -14,15 +14,7 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 
-RENDERERS = ("mitsuba", "cycles")
 CYCLES_MODEL = "blender:principled"
-
-
-def check_renderer(renderer: str) -> str:
-    name = str(renderer).strip().lower()
-    if name not in RENDERERS:
-        raise UsageError(f"renderer {renderer!r}: use one of {', '.join(RENDERERS)}")
-    return name
 
 
 def cycles_material(src) -> dict:

@@ -1,4 +1,7 @@
-"""The validation scene and ``render_sphere`` (docs/validation.md#validation-rendering: framing is normative).
+"""The validation scene and its Mitsuba render (docs/validation.md#validation-rendering: framing is normative).
+
+``brdffit.render_sphere`` (:mod:`brdffit.render.renderers`) renders with Mitsuba through
+:func:`render_sphere_mitsuba`, with Cycles through :mod:`brdffit.render.cycles`, in this framing.
 
 The scene holds only what a comparison needs: the unit sphere with the BSDF, an orthographic
 camera on +z looking down -z with +y up whose film covers exactly [-1, 1]^2 (the sphere fills the
@@ -27,7 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._mitsuba import mitsuba
-from .bsdf import Source, as_source, evaluated_calls
+from .bsdf import Source, evaluated_calls
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Float
@@ -136,46 +139,14 @@ def scene_dict(bsdf, size: int, spp: int, irradiance: float, light: np.ndarray) 
     return direct_scene(camera, size, size, _sampler(spp), {"sphere": sphere}, light, irradiance)
 
 
-def render_sphere(
-    source,
-    lights,
-    size: int = 256,
-    irradiance: float = 1.0,
-    spp: int = DEFAULT_SPP,
-    seed: int = 0,
-    progress=None,
-    renderer: str = "mitsuba",
-) -> Float[np.ndarray, "L size size 3"]:
-    """Linear radiance of the unit sphere under each light, (L, size, size, 3) float32 (docs/validation.md#validation-rendering).
-
-    ``source``: a FitResult, a ``(model_name, params)`` pair, a UBO-81 Measurement, or a path to an
-    RGL ``.bsdf`` (or another measurement file). ``lights``: unit world directions towards the
-    lights (L, 3), or (theta, phi) pairs in radians (L, 2). ``irradiance``: on a surface facing the
-    light. ``spp``: samples per pixel (stratified when a square). ``progress(k, L)`` is called
-    after each image. ``renderer``: "mitsuba" (any source) or "cycles" (a ``blender:principled``
-    fit, rendered by Blender's Cycles with its own Principled BSDF: :mod:`brdffit.render.cycles`).
-
-    An isotropic BRDF renders f_r(l, v) (n.l) irradiance with n = (x, y, sqrt(1 - x^2 - y^2)),
-    v = (0, 0, 1); anisotropic models see the tangent s = (z, 0, -x)/sqrt(x^2 + z^2) (horizontal,
-    pointing right at the image centre; see the module docstring).
-    """
-    from .cycles import check_renderer
-
-    dirs = light_directions(lights)  # bad lights (degrees, below the horizon) fail before any work
-    renderer = check_renderer(renderer)
-    size = int(size)
-    if size < 1 or spp < 1:
-        raise ValueError("size and spp must be >= 1")
-    if renderer == "cycles":
-        from .cycles import render_sphere_cycles
-
-        return render_sphere_cycles(as_source(source), dirs, size, irradiance, int(spp), int(seed), disc_mask(size),
-                                    progress)
+def render_sphere_mitsuba(src: Source, dirs: np.ndarray, size: int, irradiance: float, spp: int, seed: int,
+                          mask: np.ndarray, progress=None) -> np.ndarray:
+    """(L, size, size, 3) float32 linear radiance of ``src`` on the validation sphere, zero outside the
+    disc: one scene, the light's transform changed between images (``brdffit.render_sphere``, the
+    Mitsuba renderer of :mod:`brdffit.render.renderers`)."""
     mi = mitsuba()
-    src: Source = as_source(source)
     scene = mi.load_dict(scene_dict(src.bsdf, size, int(spp), irradiance, dirs[0]))
     params = mi.traverse(scene)
-    mask = disc_mask(size)
     out = np.zeros((len(dirs), size, size, 3), np.float32)
     with evaluated_calls():
         for k, d in enumerate(dirs):

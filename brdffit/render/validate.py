@@ -25,7 +25,8 @@ import numpy as np
 from .outputs import ValidationRun
 from ..grid import ubo_pairs
 from .bsdf import Source, as_source, import_native
-from .scene import DEFAULT_SPP, disc_mask, light_directions, render_sphere
+from .renderers import get as get_renderer, render_sphere
+from .scene import DEFAULT_SPP, disc_mask, light_directions
 
 #: Default light sweep: (theta, phi) in degrees, from the camera direction to grazing.
 DEFAULT_LIGHTS_DEG = ((0, 0), (20, 45), (40, 135), (60, 225), (75, 315))
@@ -135,9 +136,7 @@ def validate(
     ``renderer``: what renders the fit, "mitsuba" or "cycles" (a ``blender:principled`` fit in
     Blender's Cycles, docs/materials.md#native-materials-and-exports); the reference is always rendered by Mitsuba.
     """
-    from .cycles import check_renderer, cycles_material
-
-    renderer = check_renderer(renderer)
+    chosen = get_renderer(renderer)
     run = ValidationRun(out, force)  # checks the output folder before the work
 
     def tell(stage, k=0, n=0):
@@ -151,18 +150,15 @@ def validate(
     ref_src = as_source(source)
     fit_src = as_fit(fit)
     dirs = light_directions(default_lights() if lights is None else lights)
-    if renderer == "cycles":
-        from .. import cycles
-
-        cycles_material(fit_src)  # a fit Cycles cannot render: one line, before any work
-        cycles.worker()  # no Blender environment: one line, before any work
+    chosen.check(fit_src)  # a fit the renderer cannot render: one line, before any work
+    chosen.ready()  # its environment missing (Blender's, for Cycles): one line, before any work
     run.lap("load")
 
     ref_imgs = render_sphere(ref_src, dirs, size=size, irradiance=irradiance, spp=spp,
                              progress=lambda k, n: tell("render reference", k, n))
     run.lap("render reference")
     fit_imgs = render_sphere(fit_src, dirs, size=size, irradiance=irradiance, spp=spp,
-                             progress=lambda k, n: tell("render fit", k, n), renderer=renderer)
+                             progress=lambda k, n: tell("render fit", k, n), renderer=chosen)
     run.lap("render fit")
     compiled = COMPILE_SECONDS[n_compiled:]
 
@@ -173,7 +169,7 @@ def validate(
     # FLIP and NumPy release the GIL: the per-light metrics run in two threads while this thread
     # evaluates the tables, writes the EXRs and draws the panels (which wait for their metrics).
     mask = disc_mask(int(size))
-    fit_label = fit_src.label + (" (Cycles)" if renderer == "cycles" else "")
+    fit_label = fit_src.label + chosen.label
     scales = [exposure(ref_imgs[k], mask) for k in range(len(dirs))]
     with contextlib.ExitStack() as stack:
         pool = stack.enter_context(ThreadPoolExecutor(2))
@@ -209,7 +205,7 @@ def validate(
         metrics = {
             "reference": ref_src.label,
             "fit": fit_src.label,
-            "renderer": renderer,
+            "renderer": chosen.name,
             "size": int(size),
             "spp": int(spp),
             "irradiance": float(irradiance),
