@@ -4,7 +4,9 @@
 ``brdffit`` executable (:func:`is_the_executable`), before the package imports anything else, so
 that a Ctrl-C while NumPy or JAX import is handled as one later on; ``cli.entry`` installs it too
 (``python -m brdffit``). This module imports only os, signal and sys before the handler is in
-place (threading after), so what is left before it is the interpreter's own start-up (Python's handling: a traceback, or -2); it reaches
+place (threading after); a Ctrl-C before that (the package's first lines) is answered by the
+executable's own module, ``brdffit_main.py`` beside the package, with the same line and 130, so what is
+left is the interpreter's own start-up (the signal ends the process: -2, nothing ran); it reaches
 ``brdffit._files`` only once that is imported (nothing can have been written before).
 """
 

@@ -12,17 +12,48 @@ from conftest import RGL_FILES, rgl_params
 
 
 def direct_mitsuba(path, light, view):
-    """Independent reference: one Mitsuba eval per pair, converted with cos(theta_light)."""
+    """Independent reference: one Mitsuba eval per pair, converted with cos(theta_light). Where the
+    plugin's atan2(y, x) would see a vector at the pole (a view along the normal; a mirrored pair, its
+    half vector the normal) the answer turns on the sign of a zero, so the reference reads there at
+    azimuth 0, by its own hand: that view, or that pair's light, turned by 1e-6 rad towards +x."""
     from brdffit._mitsuba import mitsuba
 
     mi = mitsuba()
     import drjit as dr
 
+    light, view = np.array(light, np.float64), np.array(view, np.float64)
+    at_pole = (view[:, 0] == 0) & (view[:, 1] == 0)
+    view[at_pole] = [np.sin(1e-6), 0.0, np.cos(1e-6)]
+    mirrored = (light[:, 0] + view[:, 0] == 0) & (light[:, 1] + view[:, 1] == 0)
+    for k in np.flatnonzero(mirrored):  # a rotation of the light by 1e-6 rad about the y axis
+        x, z = light[k, 0], light[k, 2]
+        light[k, 0], light[k, 2] = x * np.cos(1e-6) + z * np.sin(1e-6), z * np.cos(1e-6) - x * np.sin(1e-6)
+    light, view = light.astype(np.float32), view.astype(np.float32)
     bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
     si = dr.zeros(mi.SurfaceInteraction3f, light.shape[0])  # every field defined, at the batch's width
     si.wi = mi.Vector3f(view[:, 0], view[:, 1], view[:, 2])
     value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(light[:, 0], light[:, 1], light[:, 2]))
     return np.stack([np.array(value[0]), np.array(value[1]), np.array(value[2])], axis=1) / light[:, 2:3]
+
+
+def test_a_view_at_the_pole_reads_one_azimuth_whatever_the_sign_of_its_zeros():
+    """Mitsuba's measured plugin reads a direction's azimuth as atan2(y, x): at the pole that is 0 or
+    pi by the sign of a zero, and Dr.Jit's kernels did not keep the sign the same from one process
+    state to another (the UBO table's pairs with the view at the pole came out mirrored after other
+    renders). The reader reads the pole at azimuth 0 whatever zeros it is given."""
+    from brdffit.render.measured import eval_measured
+
+    path = rgl_params()[0]
+    path = getattr(path, "values", [path])[0]
+    c, s = np.cos(np.radians(75)), np.sin(np.radians(75))
+    light = np.array([[-s, 0.0, c], [s, 0.0, c], [0.0, s, c]])
+    at_the_pole = [eval_measured(path, light, np.tile(view, (3, 1)))
+                   for view in ([0.0, 0.0, 1.0], [-0.0, 0.0, 1.0], [0.0, -0.0, 1.0], [-0.0, -0.0, 1.0])]
+    for f in at_the_pole[1:]:
+        np.testing.assert_array_equal(f, at_the_pole[0])
+    near = eval_measured(path, light, np.tile([1e-4, 0.0, np.sqrt(1 - 1e-8)], (3, 1)))  # azimuth 0, off the pole
+    np.testing.assert_allclose(at_the_pole[0], near, rtol=1e-3, atol=1e-7)
+    assert not np.allclose(at_the_pole[0][0], at_the_pole[0][1], rtol=1e-2)  # the light's azimuth is seen
 
 
 @pytest.mark.parametrize("path", rgl_params())

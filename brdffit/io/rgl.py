@@ -177,11 +177,49 @@ def load_measured(path: str | Path):
         raise InputError(path, f"Mitsuba's measured plugin cannot read it: {' '.join(str(exc).split())[:300]}") from None
 
 
+#: How far (radians) a direction is moved off a pole of the plugin's parametrisation, towards azimuth 0.
+POLE_NUDGE = 1e-6
+
+
+def _towards_azimuth_0(d: np.ndarray, rows: np.ndarray) -> None:
+    """Turn ``d[rows]`` by POLE_NUDGE about the y axis, towards +x, in place: y is kept exactly, so a
+    vector at the pole (or a half vector there) leaves it along azimuth 0 exactly, which is the way
+    the plugin's interpolation is approached (its value at a pole depends on the way)."""
+    x, z = d[rows, 0], d[rows, 2]
+    c, s = np.cos(POLE_NUDGE), np.sin(POLE_NUDGE)
+    d[rows, 0], d[rows, 2] = x * c + z * s, z * c - x * s
+
+
+def off_the_poles(light: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(light, view) (N, 3) read at azimuth 0 where the plugin's parametrisation has a pole.
+
+    The plugin reads the view's azimuth and the half vector's as atan2(y, x). Where that vector is at
+    the pole (x = y = 0: a view along the normal; a light and view mirrored about it, whose half
+    vector is the normal) atan2 gives 0 or pi by the sign of a zero, and Dr.Jit's fast-math kernels
+    do not keep that sign the same from one compiled kernel to another: the UBO table came out with
+    rows mirrored, or mirrored pairs swapped, after other renders in the same process. So such a view
+    is turned POLE_NUDGE towards +x, and so is the light of a pair whose half vector is at the pole:
+    the value read is the limit along azimuth 0, the same in every process (on the shared RGL files
+    it differs from a fresh process's old exact-pole reading by up to 6 % at mirrored pairs, and by a
+    mirrored light azimuth in the rows with the view at the pole). Elsewhere nothing moves."""
+    # as the kernel sees them: in float32 (two directions that are not quite mirrored in float64 can
+    # be, once rounded)
+    light = np.asarray(light, np.float32).reshape(-1, 3).astype(np.float64)
+    view = np.asarray(view, np.float32).reshape(-1, 3).astype(np.float64)
+    at_pole = (view[:, 0] == 0) & (view[:, 1] == 0)
+    view[at_pole, 1] = 0.0  # +0: its sign is what the kernels lose
+    _towards_azimuth_0(view, at_pole)
+    half = light + view
+    _towards_azimuth_0(light, (half[:, 0] == 0) & (half[:, 1] == 0))
+    return light, view
+
+
 def eval_measured(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
     """f_r(light, view), (N, 3): Mitsuba's ``measured`` plugin evaluated for all pairs at once by
     :func:`brdffit._mitsuba.eval_bsdf`, the one way brdffit evaluates a Mitsuba BSDF outside a render
-    (the validation's reference table is evaluated the same way)."""
-    return eval_bsdf(load_measured(path), light, view)
+    (the validation's reference table is evaluated the same way), off the poles of its
+    parametrisation (:func:`off_the_poles`)."""
+    return eval_bsdf(load_measured(path), *off_the_poles(light, view))
 
 
 def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:

@@ -218,7 +218,9 @@ class Source:
     def brdf(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
         """f_r(wi = light, wo = view), (N, 3), 1/sr."""
         if self.kind == "rgl":
-            return eval_bsdf(self.bsdf, wi, wo)
+            from .measured import off_the_poles
+
+            return eval_bsdf(self.bsdf, *off_the_poles(wi, wo))  # the reader's reading (io/rgl.py)
         out = np.asarray(self._brdf(np.asarray(wi, np.float64), np.asarray(wo, np.float64)), np.float64)
         return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out
 
