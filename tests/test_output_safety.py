@@ -389,6 +389,36 @@ def test_ctrl_c_in_the_first_moments_is_one_line_and_130(tmp_path, at):
     assert r.stdout == ""
 
 
+CTRL_C_AT_THE_END = r"""
+import atexit, runpy, signal, sys, time
+
+exe, sample = sys.argv[1], sys.argv[2]
+
+
+def ctrl_c_while_the_process_ends():  # atexit runs it last: the interpreter's teardown has begun
+    signal.raise_signal(signal.SIGINT)
+    time.sleep(0.5)
+
+
+atexit.register(ctrl_c_while_the_process_ends)
+sys.argv = [exe, "info", sample]
+runpy.run_path(exe, run_name="__main__")
+"""
+
+
+def test_ctrl_c_after_the_command_has_ended_changes_nothing(tmp_path):
+    """A Ctrl-C once the command has said what it did (the interpreter's teardown, the Blender worker's
+    shutdown) leaves its exit status and output as they are: it ended the process with -2 after
+    "wrote ..." (CI, the fixed-moment .blend export at 1.6 s)."""
+    exe = Path(sys.executable).with_name("brdffit")
+    if not exe.exists():
+        pytest.skip("needs the installed brdffit executable")
+    r = subprocess.run([sys.executable, "-c", CTRL_C_AT_THE_END, str(exe), str(SAMPLE)],
+                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=_deliverable_sigint)
+    assert (r.returncode, r.stderr) == (0, ""), r.stderr
+    assert str(SAMPLE.name) in r.stdout or "81" in r.stdout
+
+
 def _export_fits(tmp_path: Path) -> tuple[Path, Path]:
     """A ggx fit.json (exported to glTF through a conversion: seconds of work) and a glTF one (none)."""
     ggx, gltf = tmp_path / "ggx", tmp_path / "gltf"

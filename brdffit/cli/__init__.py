@@ -216,6 +216,10 @@ def entry() -> None:
     try:
         status = main()
     finally:
+        # The command has ended and said so: a Ctrl-C from here on (the interpreter's teardown, the
+        # Blender worker's shutdown) changes nothing. Left to the default it ended the process with
+        # -2 after "wrote ...", the result in place. (Python's teardown keeps an ignored signal ignored.)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         gc.freeze()
     sys.exit(status)
 
