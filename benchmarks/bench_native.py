@@ -24,13 +24,23 @@ MODELS = ["ggx", "lambert+ggx+ggx", "mitsuba:roughconductor", "mitsuba:roughplas
 
 CASE = r"""
 import json, resource, sys, time
+
+
+def peak_mb():  # this process's own peak (VmHWM); Linux carries a parent's ru_maxrss over exec
+    try:
+        with open("/proc/self/status") as f:
+            return next(int(l.split()[1]) / 1024 for l in f if l.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 import brdffit
 m = brdffit.load(sys.argv[1])
 t = time.perf_counter(); brdffit.fit(m, sys.argv[2]); first = time.perf_counter() - t
 t = time.perf_counter(); fit = brdffit.fit(m, sys.argv[2]); warm = time.perf_counter() - t
 print("RESULT", json.dumps({"loss": fit.loss_value, "log_rmse": fit.metrics["log_rmse"], "rel_rmse": fit.metrics["rel_rmse"],
                             "converged": bool(fit.converged), "warm": warm, "first": first,
-                            "mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+                            "mb": peak_mb()}))
 """
 
 
