@@ -12,9 +12,9 @@
   ``gltf_pbr`` for a glTF fit, ``open_pbr_surface`` for a Blender fit). A BTF's parameter maps
   export as textured materials of the same formats (:mod:`.textured`).
 
-``brdffit export FIT.json [--to MODEL] -o FILE`` and the explorer's Export are thin surfaces over
-these two functions. (They are not methods of ``FitResult``: converting runs a fit, and the fit
-driver makes FitResults, so a method here would tie the fitting layer to this one in a circle.)
+``FitResult.convert`` / ``FitResult.export``, ``brdffit export FIT.json [--to MODEL] -o FILE`` and the
+explorer's Export are thin surfaces over these two functions. A conversion runs the fit driver (the
+engine, below this layer) rather than ``brdffit.fit``, which stands above it with FitResult.
 """
 
 from __future__ import annotations
