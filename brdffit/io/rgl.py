@@ -214,12 +214,17 @@ def off_the_poles(light: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.n
     return light, view
 
 
+def eval_plugin(bsdf, light: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """f_r(light, view), (N, 3), of a loaded ``measured`` plugin (:func:`load_measured`), all pairs at
+    once by :func:`brdffit._mitsuba.eval_bsdf`, off the poles of its parametrisation
+    (:func:`off_the_poles`): how the reader reads a file and how the validation's reference table
+    is evaluated."""
+    return eval_bsdf(bsdf, *off_the_poles(light, view))
+
+
 def eval_measured(path: Path, light: np.ndarray, view: np.ndarray) -> np.ndarray:
-    """f_r(light, view), (N, 3): Mitsuba's ``measured`` plugin evaluated for all pairs at once by
-    :func:`brdffit._mitsuba.eval_bsdf`, the one way brdffit evaluates a Mitsuba BSDF outside a render
-    (the validation's reference table is evaluated the same way), off the poles of its
-    parametrisation (:func:`off_the_poles`)."""
-    return eval_bsdf(load_measured(path), *off_the_poles(light, view))
+    """f_r(light, view), (N, 3), of the RGL file ``path`` (:func:`eval_plugin`)."""
+    return eval_plugin(load_measured(path), light, view)
 
 
 def read(path, *, wi=None, wo=None, name: str | None = None) -> Measurement:

@@ -218,9 +218,9 @@ class Source:
     def brdf(self, wi: Float[np.ndarray, "N 3"], wo: Float[np.ndarray, "N 3"]) -> Float[np.ndarray, "N 3"]:
         """f_r(wi = light, wo = view), (N, 3), 1/sr."""
         if self.kind == "rgl":
-            from .measured import off_the_poles
+            from .measured import eval_plugin
 
-            return eval_bsdf(self.bsdf, *off_the_poles(wi, wo))  # the reader's reading (io/rgl.py)
+            return eval_plugin(self.bsdf, wi, wo)  # as the reader reads the file
         out = np.asarray(self._brdf(np.asarray(wi, np.float64), np.asarray(wo, np.float64)), np.float64)
         return np.broadcast_to(out, (out.shape[0], 3)) if out.shape[1] == 1 else out
 

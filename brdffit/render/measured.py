@@ -5,4 +5,4 @@ where the renderer's modules look for them."""
 
 from __future__ import annotations
 
-from ..io.rgl import eval_measured, load_measured, off_the_poles  # noqa: F401
+from ..io.rgl import eval_measured, eval_plugin, load_measured  # noqa: F401
