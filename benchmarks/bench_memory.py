@@ -1,6 +1,6 @@
 """Peak memory of ``fit_btf`` (docs/btf.md#at-scale: one 96 x 96 tile in at most 2 GB, a 400 x 400 BTF in
-at most 3 GB), each measured in a child process of its own (the peak resident memory the kernel counted, the
-JAX runtime and the compiled programs included).
+at most 3 GB), each measured in a child process of its own (its own peak resident memory,
+``peak_memory.peak_mb``: the JAX runtime and the compiled programs included).
 
 The BTFs are generated straight into their tile caches (``btf.generate.model_btf``, in another child
 process: the generator holds a light's tables for every texel), then fitted with the default options.
@@ -19,11 +19,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from peak_memory import CHILD_PRELUDE
+
 #: name -> (BTF side, tile, bound in GB)
 CASES = {"tile96": (96, 96, 2.0), "btf400": (400, 16, 3.0)}
 
-CHILD = """
-import json, resource, sys, time
+CHILD = CHILD_PRELUDE + """
+import json, sys, time
 from pathlib import Path
 import brdffit
 from brdffit.btf.reader import BTF
@@ -32,13 +34,7 @@ btf = BTF(**{**meta, "cache": Path(meta["cache"])})
 t = time.perf_counter()
 maps = brdffit.fit_btf(btf, sys.argv[2], progress=False)
 seconds = time.perf_counter() - t
-# The peak of this process's own memory: VmHWM (Linux) is the high-water mark of the address space that
-# exec created; ru_maxrss is not, as Linux carries the parent's peak over exec (a child of a pytest worker
-# that had grown to 4 GB "peaked" at 4 GB before it ran a line).
-status = Path("/proc/self/status")
-hwm = [l for l in status.read_text().splitlines() if l.startswith("VmHWM:")] if status.exists() else []
-peak_mb = int(hwm[0].split()[1]) / 1024.0 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-print(json.dumps({"seconds": seconds, "peak_mb": peak_mb,
+print(json.dumps({"seconds": seconds, "peak_mb": peak_mb(),
                   "converged": float(maps.converged.mean())}))
 """
 

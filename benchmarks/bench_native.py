@@ -19,21 +19,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+from peak_memory import CHILD_PRELUDE
+
 MODELS = ["ggx", "lambert+ggx+ggx", "mitsuba:roughconductor", "mitsuba:roughplastic", "mitsuba:principled",
           "gltf:metallic_roughness", "blender:principled"]
 
-CASE = r"""
-import json, resource, sys, time
-
-
-def peak_mb():  # this process's own peak (VmHWM); Linux carries a parent's ru_maxrss over exec
-    try:
-        with open("/proc/self/status") as f:
-            return next(int(l.split()[1]) / 1024 for l in f if l.startswith("VmHWM:"))
-    except (OSError, StopIteration):
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
+CASE = CHILD_PRELUDE + r"""
+import json, sys, time
 import brdffit
 m = brdffit.load(sys.argv[1])
 t = time.perf_counter(); brdffit.fit(m, sys.argv[2]); first = time.perf_counter() - t

@@ -32,18 +32,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-CASE = r"""
-import json, resource, sys, time
+from peak_memory import CHILD_PRELUDE
 
-
-def peak_mb():  # this process's own peak (VmHWM); Linux carries a parent's ru_maxrss over exec
-    try:
-        with open("/proc/self/status") as f:
-            return next(int(l.split()[1]) / 1024 for l in f if l.startswith("VmHWM:"))
-    except (OSError, StopIteration):
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
+CASE = CHILD_PRELUDE + r"""
+import json, sys, time
 import numpy as np
 import mitsuba as mi
 variant, case, size, spp, rgl = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
