@@ -29,7 +29,6 @@ import functools
 import itertools
 import math
 import re
-import time
 
 import jax
 import jax.numpy as jnp
@@ -313,25 +312,6 @@ def take_rows(data: Data, idx) -> Data:
     """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
-
-
-def subset(data: Data) -> Data:
-    idx = subset_index(data)
-    return data if idx is None else take_rows(data, idx)
-
-
-def best_starts(model: Model, loss: str, data: Data, lo, hi, free, anchor, k: int = 1, note=None):
-    """The k best grid starts: flat params (k, P), their grid losses (k,), compile s, run s."""
-    from .cache import compiled
-
-    grid = jnp.asarray(grid_for(model, lo, hi, free, anchor))
-    args = (grid, subset(data), jnp.asarray(lo), jnp.asarray(hi), jnp.asarray(free, dtype=bool), jnp.asarray(anchor))
-    fn, compile_s = compiled(("init", model, loss), lambda: vp_grid(model, loss), *args, note=note)
-    t0 = time.perf_counter()
-    flats, values = jax.block_until_ready(fn(*args))
-    order = np.argsort(np.asarray(values))[:k]
-    run_s = time.perf_counter() - t0
-    return np.asarray(flats)[order], np.asarray(values)[order], compile_s, run_s
 
 
 # -- lobes the data do not see --------------------------------------------------------------------
