@@ -55,6 +55,9 @@ STOP_REQUESTED = threading.Event()
 _GUARD = threading.RLock()
 _RESERVED: dict[str, Path] = {}
 _COMMITTED: list[Path] = []
+#: Targets whose commit completes a result of several files (:func:`complete_with`): once one is
+#: committed, everything committed before it stays, whatever interrupts the run afterwards.
+_COMPLETING: set[Path] = set()
 #: This run's scratch folders (:func:`scratch_dir`) and helper processes (:func:`start_process`),
 #: stopped and removed by :func:`remove_this_runs_outputs` (also under ``_GUARD``).
 _SCRATCH: list[Path] = []
@@ -135,6 +138,9 @@ def _commit(tmp: Path, path: Path, force: bool) -> None:
     with _GUARD:
         _commit_guarded(tmp, path, force)
         _COMMITTED.append(path.absolute())
+        if path.absolute() in _COMPLETING:  # in the same guarded step: no moment sees it half kept
+            _COMPLETING.discard(path.absolute())
+            _COMMITTED.clear()
 
 
 def _commit_guarded(tmp: Path, path: Path, force: bool) -> None:
@@ -282,6 +288,14 @@ def forget_committed() -> None:
     """Start a new command: what was committed before is not this command's to remove."""
     with _GUARD:
         _COMMITTED.clear()
+
+
+def complete_with(path: str | os.PathLike) -> None:
+    """The commit of ``path`` will complete a result of several files (a BTF material's outputs, whose
+    ``params.exr`` is written last): from that commit on, an interrupt keeps everything committed so
+    far. Marked before the work, so that there is no moment between the last file and the keeping."""
+    with _GUARD:
+        _COMPLETING.add(Path(path).absolute())
 
 
 def remove_this_runs_outputs(timeout: float = 10.0) -> None:

@@ -226,6 +226,30 @@ def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path):
     _files.forget_committed()
 
 
+def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path):
+    """A result of several files (a BTF material: previews, summary, then params.exr) is kept from the
+    moment its last file is committed, in the same step: an interrupt right after took the finished
+    material back (CI: the database run's Ctrl-C once cork/params.exr existed)."""
+    from brdffit import _files
+    from brdffit._files import atomic_file
+
+    _files.forget_committed()
+    material, next_one = tmp_path / "cork", tmp_path / "felt"
+    material.mkdir()
+    next_one.mkdir()
+    _files.complete_with(material / "params.exr")
+    for name in ("preview.png", "summary.json", "params.exr"):
+        with atomic_file(material / name) as tmp:
+            tmp.write_text(name)
+    with atomic_file(next_one / "preview.png") as tmp:  # the next material, not complete
+        tmp.write_text("x")
+    _files.remove_this_runs_outputs(timeout=1.0)
+    _files._GUARD.release()  # the watcher would end the process here, holding it
+    _files.forget_committed()
+    assert sorted(p.name for p in material.iterdir()) == ["params.exr", "preview.png", "summary.json"]
+    assert list(next_one.iterdir()) == []
+
+
 def test_keyboard_interrupt_in_process_is_130(tmp_path, monkeypatch, capsys):
     """In-process: an interrupt during the work unwinds the temporary result."""
     import brdffit.cli.convert as convert_module

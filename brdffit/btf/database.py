@@ -36,7 +36,7 @@ import json
 import sys
 from pathlib import Path
 
-from .._files import atomic_file, forget_committed
+from .._files import atomic_file, complete_with, forget_committed
 from .._progress import progress_bar
 from ..errors import InputError, UsageError
 from ..io.images import IMAGE_EXTENSIONS, VIEW_DIR
@@ -163,10 +163,11 @@ def fit_btf_database(
                           rate="texels") as bar:
             plan = _Plan(out, model, loss, solver, neighbours, read, cache_dir, client, force, batch_options)
             for i, m in enumerate(left, 1):
+                # A material is a complete result once its params.exr (written last) is committed: an
+                # interrupt from that moment on keeps it (the CLI's Ctrl-C removes only what this
+                # command committed since its last complete result).
+                complete_with(out / m.name / "params.exr")
                 plan.fit(m, f"{m.name} ({i}/{len(left)})", bar)
-                # A finished material is a complete result: an interrupt from here on keeps it
-                # (the CLI's Ctrl-C removes only what this command committed and did not forget).
-                forget_committed()
         result = DatabaseFit(out, tuple(_row(out / m.name, m, m in left) for m in mats))
         _write_summary(result)
     return result
