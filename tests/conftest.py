@@ -59,6 +59,19 @@ def full_folder(tmp_path_factory):
     return root
 
 
+def interrupted_before_brdffit_ran(code: int, err: str) -> bool:
+    """A Ctrl-C that reached the ``brdffit`` executable during the interpreter's own start-up, before
+    any of brdffit's code (``brdffit_main``) ran. Python then dies of the signal (-2, at most with a
+    traceback of the console script's import line) or exits 1 ("Fatal Python error" while importing
+    ``site``, or a bare ``KeyboardInterrupt``); some moments it swallows the signal and runs on (exit 0,
+    the command's whole result). Only the interpreter ran, so only "nothing written" can be asked of
+    it; a loaded machine stretches this window past 0.1 s. Output naming a file of brdffit's own (or
+    brdffit's one line) is not this case."""
+    package = Path(__file__).resolve().parents[1] / "brdffit"
+    ours = "brdffit: " in err or 'brdffit_main.py"' in err or f"{package}{os.sep}" in err
+    return code in (-2, 1) and (err == "" or err.rstrip().endswith("KeyboardInterrupt")) and not ours
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     d = data_dir()
