@@ -65,8 +65,12 @@ def test_rgl_equals_mitsuba_on_ubo81(path):
     np.testing.assert_allclose(np.asarray(m.wo), wo, rtol=0, atol=1e-12)
     ref = direct_mitsuba(path, wi.astype(np.float32), wo.astype(np.float32))
     v = np.asarray(m.values)
-    scale = np.maximum(np.abs(ref), 1e-6 * np.abs(ref).max())
-    assert np.max(np.abs(v - ref) / scale) < 1e-5
+    # Both sides are float32 evaluations by Mitsuba, compiled separately (Dr.Jit may fuse differently):
+    # near-zero values differ by rounding of their larger neighbours, ~1e-10 of the table's maximum
+    # (seen: 1.2e-4 relative on a value 1e-6 of the maximum). Allowed: 1e-5 relative, plus a tenth
+    # of float32's epsilon of the maximum -- far below any convention error (those are whole values).
+    tol = 1e-5 * np.abs(ref) + 0.1 * np.finfo(np.float32).eps * np.abs(ref).max()
+    assert np.all(np.abs(v - ref) <= tol), np.max(np.abs(v - ref) - tol)
     assert m.meta["format"] == "rgl" and m.table().shape == (81, 81, 3)
 
 
