@@ -42,11 +42,14 @@ def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitCons
     wi, wo, ref, sqrt_w, cos_i, floor = data
     if geometry is None:
         geometry = precompute_geometry(model, data)
+    # Computed with the channels first, (C, N): XLA vectorises the last axis, and N x 3 it runs as N
+    # rows of three (ggx/UBO-81's log transform: 0.49 -> 0.09 ms, a fifth of a texel's solve).
     # Materialised once: XLA would otherwise recompute g(f_ref) (a log1p per value) inside every
     # fusion that reads it (loss floor, start, result check, metrics).
-    g_ref, geometry = jax.lax.optimization_barrier((L.reference_transform(loss, ref, cos_i, floor), geometry))
-    r0 = L.residual(loss, jnp.zeros_like(ref), ref, cos_i, sqrt_w, floor, g_ref)
-    return FitConstants(g_ref, geometry, 1e-26 * jnp.sum(r0 * r0))
+    ref_t, cos_t, sqrt_w_t, floor_t = ref.T, cos_i.T, sqrt_w.T, floor[:, None]
+    g_t, geometry = jax.lax.optimization_barrier((L.reference_transform(loss, ref_t, cos_t, floor_t), geometry))
+    r0 = L.residual(loss, jnp.zeros_like(ref_t), ref_t, cos_t, sqrt_w_t, floor_t, g_t)
+    return FitConstants(None if g_t is None else g_t.T, geometry, 1e-26 * jnp.sum(r0 * r0))
 
 
 def model_loss(model: Model, loss: str):
