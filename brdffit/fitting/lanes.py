@@ -35,8 +35,9 @@ from .cache import compiled
 from .problem import Data
 
 #: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring). One lane at a
-#: time: vectorising 4 or 8 gained nothing measurable on 2 cores (one evaluation of ggx on UBO-81 holds
-#: ~20 arrays of 6561 values; several lanes' no longer fit the core's cache), and a lane computed alone is
+#: time: vectorising is slower on 2 cores (a 64 x 64 ggx BTF, warm: 768-792 texels/s one lane at a time,
+#: 662-686 with 4, 596-603 with 16; one evaluation of ggx on UBO-81 holds ~20 arrays of 6561 values, and
+#: several lanes' no longer fit the core's cache), and a lane computed alone is
 #: computed identically whatever its chunk holds, so a BTF's maps do not depend on how its tiles were
 #: grouped (processes, Dask workers, a resumed run).
 CPU_CHUNK = 64
