@@ -285,9 +285,11 @@ def atomic_dir(path: str | os.PathLike, force: bool = False):
 
 
 def forget_committed() -> None:
-    """Start a new command: what was committed before is not this command's to remove."""
+    """Start a new command: what was committed before is not this command's to remove (nor does a
+    result an earlier command marked with :func:`complete_with` complete one of this command's)."""
     with _GUARD:
         _COMMITTED.clear()
+        _COMPLETING.clear()
 
 
 def complete_with(path: str | os.PathLike) -> None:

@@ -6,7 +6,8 @@ that a Ctrl-C while NumPy or JAX import is handled as one later on; ``cli.entry`
 (``python -m brdffit``). This module imports only os, signal and sys before the handler is in
 place (threading after); a Ctrl-C before that (the package's first lines) is answered by the
 executable's own module, ``brdffit_main.py`` beside the package, with the same line and 130, so what is
-left is the interpreter's own start-up (the signal ends the process: -2, nothing ran); it reaches
+left is the interpreter's own start-up, where the signal is Python's (see ``brdffit_main.py``: nothing
+of brdffit ran, nothing written); it reaches
 ``brdffit._files`` only once that is imported (nothing can have been written before).
 """
 

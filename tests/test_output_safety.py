@@ -252,6 +252,25 @@ def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path):
     assert list(next_one.iterdir()) == []
 
 
+def test_a_mark_of_an_earlier_command_completes_nothing_of_the_next(tmp_path):
+    """``complete_with`` belongs to the command that said it: a command that ended before its last file
+    (an in-process run interrupted, a database stopped by bad input) leaves no mark that would keep the
+    next command's files from an interrupt."""
+    from brdffit import _files
+    from brdffit._files import atomic_file
+
+    _files.forget_committed()
+    _files.complete_with(tmp_path / "params.exr")  # the earlier command never got there
+    _files.forget_committed()  # the next command starts
+    for name in ("preview.png", "params.exr"):
+        with atomic_file(tmp_path / name) as tmp:
+            tmp.write_text(name)
+    _files.remove_this_runs_outputs(timeout=1.0)
+    _files._GUARD.release()  # the watcher would end the process here, holding it
+    _files.forget_committed()
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_keyboard_interrupt_in_process_is_130(tmp_path, monkeypatch, capsys):
     """In-process: an interrupt during the work unwinds the temporary result."""
     import brdffit.cli.convert as convert_module

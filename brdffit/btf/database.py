@@ -36,7 +36,7 @@ import json
 import sys
 from pathlib import Path
 
-from .._files import atomic_file, complete_with, forget_committed
+from .._files import atomic_file, complete_with
 from .._progress import progress_bar
 from ..errors import InputError, UsageError
 from ..io.images import IMAGE_EXTENSIONS, VIEW_DIR
@@ -253,9 +253,9 @@ def _database_folder(out: Path, record: dict, force: bool):
                 raise UsageError(f"{out}: holds a database run of another model or options "
                                  "(use --force to fit every material again)")
         if previous != record:
+            complete_with(out / RECORD)  # the record stays with the materials an interrupted run keeps
             with atomic_file(out / RECORD, force=True) as tmp:
                 tmp.write_text(json.dumps(record, indent=2) + "\n")
-            forget_committed()  # the record stays with the materials an interrupted run keeps
         yield
     finally:
         held.close()
