@@ -5,6 +5,7 @@ them), else from ../shared/data; tests that need them skip with a reason when th
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -57,6 +58,13 @@ def full_folder(tmp_path_factory):
         for j in range(81):
             img.save(root / f"{direction_name(i, j)}.png")
     return root
+
+
+def deliverable_sigint() -> None:
+    """``preexec_fn`` of a child that a test sends Ctrl-C: a terminal's default SIGINT disposition. A test
+    runner's worker (pytest-xdist) may run with SIGINT ignored or blocked, which a child inherits."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def interrupted_before_brdffit_ran(code: int, err: str) -> bool:

@@ -22,7 +22,7 @@ from brdffit import cycles
 from brdffit.cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from conftest import interrupted_before_brdffit_ran  # noqa: E402
+from conftest import deliverable_sigint, interrupted_before_brdffit_ran  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONPATH": str(REPO)}
@@ -113,11 +113,6 @@ def test_the_worker_runs_in_a_session_of_its_own(fake_blender):
     assert not w.scratch.exists()
 
 
-def _terminal_sigint() -> None:  # a terminal's default SIGINT disposition (see test_output_safety)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def _ctrl_c_export(tmp_path: Path, env: dict, when) -> tuple[int, str, Path, Path]:
     """``brdffit export FIT -o out/paint.blend`` in a process group of its own (as a shell runs a
     command), Ctrl-C sent to the whole group (as a terminal does) once ``when(tmp)`` is true."""
@@ -127,7 +122,7 @@ def _ctrl_c_export(tmp_path: Path, env: dict, when) -> tuple[int, str, Path, Pat
     src = fit_file(tmp_path)
     p = subprocess.Popen([*brdffit_cmd(), "export", str(src), "-o", str(out / "paint.blend")], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env={**ENV, **env, "TMPDIR": str(tmp)},
-                         preexec_fn=_terminal_sigint, start_new_session=True)
+                         preexec_fn=deliverable_sigint, start_new_session=True)
     deadline = time.monotonic() + 120
     while not when(tmp) and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)

@@ -25,6 +25,9 @@ from brdffit.btf import tile as btf_tile
 from brdffit.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests"))
+from conftest import deliverable_sigint  # noqa: E402
+
 #: material -> (rows, columns) of texels; with --tile 4: 1, 4 and 2 tiles
 SIZES = {"cork": (4, 4), "felt": (8, 8), "wool": (4, 8)}
 
@@ -174,12 +177,6 @@ def test_bad_input_is_one_line_naming_the_file_before_any_work(database, tmp_pat
     assert not out.exists()  # nothing written, not even the folder
 
 
-def _deliverable_sigint() -> None:
-    # a test runner's worker may run with SIGINT ignored or blocked, which a child inherits
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 # preexec_fn makes subprocess fork; the child only resets its SIGINT handling, then execs
 @pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_ctrl_c_keeps_the_finished_materials_and_the_next_run_goes_on(database, singles, tmp_path):
@@ -189,7 +186,7 @@ def test_ctrl_c_keeps_the_finished_materials_and_the_next_run_goes_on(database, 
             "fit-btf", str(database), "--model", "lambert", "--tile", "4", "-o", str(out)]
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONPATH": str(REPO)}
     p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                         preexec_fn=_deliverable_sigint)
+                         preexec_fn=deliverable_sigint)
     deadline = time.monotonic() + 300
     while not (out / "cork" / "params.exr").exists() and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)

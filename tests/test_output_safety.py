@@ -18,7 +18,7 @@ from brdffit.cli import main
 from brdffit.errors import UsageError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from conftest import interrupted_before_brdffit_ran  # noqa: E402
+from conftest import deliverable_sigint, interrupted_before_brdffit_ran  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "data" / "sample_ubo81.exr"
@@ -160,20 +160,13 @@ def test_sigkill_during_a_real_fit_leaves_the_old_result(tmp_path):
     assert hidden(tmp_path) == []
 
 
-def _deliverable_sigint() -> None:
-    # A test runner's worker (pytest-xdist) may run with SIGINT ignored or blocked, which a child
-    # inherits: give the child a terminal's default, as a user's shell does.
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def test_ctrl_c_exits_130_with_nothing_written(tmp_path):
     out = tmp_path / "I"
     # No compile cache: the fit then takes seconds (compiling), so the interrupt lands mid-work
     # (with a warm cache the whole fit can end before the signal arrives).
     p = subprocess.Popen([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert+ggx", "-o", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**ENV, "BRDFFIT_CACHE": "off"},
-                         preexec_fn=_deliverable_sigint)
+                         preexec_fn=deliverable_sigint)
     lock = tmp_path / ".I.brdffit-lock"
     deadline = time.monotonic() + 300
     while not lock.exists() and p.poll() is None and time.monotonic() < deadline:
@@ -199,7 +192,7 @@ def test_ctrl_c_at_a_fixed_moment_ends_at_once_with_nothing_written(tmp_path, mo
     out = tmp_path / "fit"
     p = subprocess.Popen([*brdffit_cmd(), "fit", str(SAMPLE), "--model", "lambert+ggx+ggx", "-o", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**ENV, "BRDFFIT_CACHE": "off"},
-                         preexec_fn=_deliverable_sigint)
+                         preexec_fn=deliverable_sigint)
     time.sleep(moment)
     assert p.poll() is None, "the fit ended before the signal: the moment is too late for this test"
     p.send_signal(signal.SIGINT)
@@ -429,7 +422,7 @@ def test_ctrl_c_in_the_first_moments_is_one_line_and_130(tmp_path, at):
     if not exe.exists():
         pytest.skip("needs the installed brdffit executable")
     r = subprocess.run([sys.executable, "-c", CTRL_C_IN_THE_PACKAGES_IMPORTS, str(exe), str(SAMPLE), at],
-                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=_deliverable_sigint)
+                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=deliverable_sigint)
     assert (r.returncode, r.stderr) == (130, "brdffit: interrupted\n")
     assert r.stdout == ""
 
@@ -459,7 +452,7 @@ def test_ctrl_c_after_the_command_has_ended_changes_nothing(tmp_path):
     if not exe.exists():
         pytest.skip("needs the installed brdffit executable")
     r = subprocess.run([sys.executable, "-c", CTRL_C_AT_THE_END, str(exe), str(SAMPLE)],
-                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=_deliverable_sigint)
+                       capture_output=True, text=True, env=ENV, timeout=120, preexec_fn=deliverable_sigint)
     assert (r.returncode, r.stderr) == (0, ""), r.stderr
     assert str(SAMPLE.name) in r.stdout or "81" in r.stdout
 
