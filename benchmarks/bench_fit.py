@@ -40,7 +40,8 @@ import numpy as np
 
 import brdffit
 from brdffit._fit_defaults import DEFAULT_RTOL
-from brdffit.fitting.problem import flat_residual, prepare, resolve_model
+from brdffit.fitting.objective import flat_residual
+from brdffit.fitting.problem import prepare, resolve_model
 
 REPO = Path(__file__).resolve().parents[1]
 START = {"kd": 0.2, "ks": 0.5, "alpha": 0.3, "f0": 0.05}
@@ -124,7 +125,7 @@ def step_cost(meas, model_name: str, repeat: int = 200) -> dict:
     """FLOPs (XLA's cost analysis) and time (best of 5 runs of ``repeat``) of what one ``lm`` step
     computes (loss, J^T r, J^T J at a trial point), in the structured form the solver uses and in
     the dense jacfwd form, on ``meas``."""
-    from brdffit.fitting.structure import dense_normal_equations, normal_equations
+    from brdffit.fitting.objective import dense_normal_equations, normal_equations
 
     prep = prepare(meas)
     model = resolve_model(model_name, prep.channels)

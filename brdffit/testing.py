@@ -72,7 +72,7 @@ def model_problems(model: str | Model, dtype="float64", param_sets=None, pairs=N
 
     Checks, per parameter set: values finite and >= 0, in ``dtype`` (no promotion of float32);
     the Jacobian with respect to the parameters and the gradients with respect to wi and wo
-    finite; and the structure the solver relies on (``brdffit.fitting.structure``): channel c of
+    finite; and the structure the solver relies on (``brdffit.fitting.objective``): channel c of
     f_r depends on channel c of a 3-channel parameter only, and f_r is affine in the parameters
     declared ``linear``. One jit compilation: the parameter sets are vmapped. Returns [] when all
     is well.

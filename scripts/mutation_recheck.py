@@ -54,7 +54,7 @@ TESTS_BY_MODULE = {
     "brdffit.fitting.solver_lm": ["tests/test_solver.py", "tests/test_multistart.py"],
     "brdffit.fitting.solver_optx": ["tests/test_solver.py", "tests/test_parameter_space.py"],
     "brdffit.fitting.solver_scipy": ["tests/test_solver.py", "tests/test_fit_status.py"],
-    "brdffit.fitting.structure": ["tests/test_structure.py"],
+    "brdffit.fitting.objective": ["tests/test_structure.py", "tests/test_losses_values.py"],
 }
 RECHECK = Path("mutants/recheck.json")
 

@@ -302,7 +302,7 @@ def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
 
 
 def test_lm_fits_take_the_structured_normal_equations(monkeypatch):
-    """The bounded LM of a fit gets its model's structured J^T J (brdffit.fitting.structure), never
+    """The bounded LM of a fit gets its model's structured J^T J (brdffit.fitting.objective), never
     the generic forward-mode Jacobian of every entry (equal numbers, several times the cost:
     PERFORMANCE-NOTES). An rtol of its own makes the fit program new, and the disk cache is off
     for it, so it is traced here."""

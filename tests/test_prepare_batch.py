@@ -9,7 +9,7 @@ import pytest
 
 import brdffit
 from brdffit.errors import UsageError
-from brdffit.fitting.problem import prepare, prepare_values, stack
+from brdffit.fitting.problem import prepare, prepare_values, stack_data
 from brdffit.grid import ubo_pairs
 
 
@@ -31,7 +31,7 @@ def test_equals_prepare_of_each_texel():
     wi[60] = (np.sqrt(1.0 - 1e-18), 0.0, 1e-9)  # a grazing light: used, its cosine clipped to 1e-7
     wo[50] = (0.0, 1.0, 0.0)  # a view exactly on the horizon
     got = prepare_values(values, wi, wo, weights)
-    want = stack([prepare(brdffit.Measurement(wi, wo, values[k], weights=weights, name=f"t{k}")).data for k in range(n)])
+    want = stack_data([prepare(brdffit.Measurement(wi, wo, values[k], weights=weights, name=f"t{k}")).data for k in range(n)])
     for field, a, b in zip(got._fields, got, want):
         assert a.shape == b.shape, field
         np.testing.assert_allclose(a, b, rtol=1e-15, atol=0)

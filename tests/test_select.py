@@ -15,7 +15,8 @@ import brdffit
 from brdffit import models
 from brdffit.errors import UsageError
 from brdffit.fitting import fit, select
-from brdffit.fitting.problem import evaluate, prepare
+from brdffit.fitting.objective import evaluate
+from brdffit.fitting.problem import prepare
 from brdffit.grid import spherical_to_cartesian
 
 TRUE = {"kd": [0.3, 0.2, 0.1], "ks": [0.6, 0.5, 0.4], "alpha": [0.25], "f0": [0.3]}

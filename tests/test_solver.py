@@ -43,7 +43,7 @@ def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
 
     from brdffit.fitting.driver import solve
     from brdffit.fitting.options import FitOptions
-    from brdffit.fitting.problem import stack
+    from brdffit.fitting.problem import stack_data
 
     prep = prepare(meas)
     options = FitOptions(loss=loss, solver=solver, rtol=1e-9, max_steps=200)
@@ -51,7 +51,7 @@ def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
     free = np.asarray(free, bool)
     space = dataclasses.replace(options.space(resolve_model("ggx", 3)), lo=np.asarray(lo, float),
                                 hi=np.asarray(hi, float), free=free, values=np.where(free, np.nan, start))
-    out = solve(space, options, stack([prep.data]), starts=start[None], grid=False)
+    out = solve(space, options, stack_data([prep.data]), starts=start[None], grid=False)
     return out.v[0], float(out.loss[0]), int(out.code[0]), int(out.steps[0])
 
 

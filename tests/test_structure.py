@@ -1,4 +1,4 @@
-"""The solver's structured normal equations (``brdffit.fitting.structure``) equal the dense
+"""The solver's structured normal equations (``brdffit.fitting.objective``) equal the dense
 computation (``jax.jacfwd`` over every entry, then J^T r and J^T J) for every model of the library,
 composites with repeated lobes, every loss, monochrome data and parameters on bounds. The dense
 form is the reference: it assumes nothing about the model."""
@@ -13,7 +13,7 @@ import pytest
 import brdffit
 from brdffit import models
 from brdffit.fitting.problem import prepare, resolve_model
-from brdffit.fitting.structure import compression, dense_normal_equations, normal_equations, separable
+from brdffit.fitting.objective import compression, dense_normal_equations, normal_equations, separable
 from brdffit.grid import spherical_to_cartesian, ubo_pairs
 
 MODELS = models.names() + ["lambert+ggx+ggx", "lambert+ward+blinn_phong", "oren_nayar+cook_torrance",
@@ -101,7 +101,7 @@ def test_a_term_without_linear_parameters():
 def test_with_the_once_per_fit_terms(name):
     # What the solver passes: g(f_ref) and the direction-only terms, computed before the loop.
     from brdffit.fitting.losses import reference_transform
-    from brdffit.fitting.structure import precompute_geometry
+    from brdffit.fitting.objective import precompute_geometry
 
     mdl = resolve_model(name, 3)
     prep = _data(seed=3)
@@ -120,7 +120,7 @@ def test_with_the_once_per_fit_terms(name):
 def test_model_values_equal_model_eval(name):
     # What the program evaluates for the result check and the metrics: the step's route (the basis
     # from the direction-only terms) where the model is separable, model.eval otherwise.
-    from brdffit.fitting.structure import model_values, precompute_geometry
+    from brdffit.fitting.objective import model_values, precompute_geometry
 
     mdl = resolve_model(name, 3)
     prep = _data(seed=5)
@@ -138,7 +138,7 @@ def test_the_geometry_split_gives_the_basis_and_its_partials_unchanged(name):
     """GeometrySplit cuts basis_and_partials in two; joined again they give the same arrays, one
     partial per nonlinear parameter (extra rows of zeros would pass through the step unnoticed, at a
     cost per step)."""
-    from brdffit.fitting.structure import basis_and_partials, basis_fn, geometry_split
+    from brdffit.fitting.objective import basis_and_partials, basis_fn, geometry_split
 
     mdl = resolve_model(name, 3)
     wi, wo = (jnp.asarray(a[:60]) for a in ubo_pairs())

@@ -2,20 +2,20 @@
 
 The modules, in the order a fit uses them (read them so):
 
-1. the problem: ``problem`` (a Measurement -> ``Data``: excluded samples, weights, the data's
-   unit), ``losses`` (the five losses and their residuals), ``structure`` (a model's linear and
-   nonlinear parts, the structured J^T J), ``linalg``;
+1. the data and the objective: ``problem`` (a Measurement -> ``Data``: excluded samples, weights, the
+   data's unit; a batch of them), ``losses`` (the five losses and their residuals), ``objective`` (the
+   residual, loss values and metrics, a fit's constants, the structured normal equations of a step),
+   ``linalg``;
 2. where a fit may move: ``space`` (``ParameterSpace``: bounds, ``physical=``, ``bounds=``,
    ``fixed=``, lobes of one kind in order, ``at_bound`` and warnings);
 3. starts: ``init`` (the variable-projection grid: nonlinear parameters on a small structure-aware
    grid, linear ones by bounded least squares; a switched-off lobe re-seeded);
-4. solvers, one family per file: ``solve`` (what a fit computes once, the best of its starts, the
-   check of a result), ``solver_lm`` (``lm``, brdffit's bounded Levenberg-Marquardt as an
-   optimistix solver), ``solver_optx`` (optimistix's stock ``optx_lm``, ``gauss_newton``,
-   ``dogleg``, ``bfgs`` on an unconstrained variable), ``solver_scipy`` (scipy's TRF, the
-   reference);
-5. compiled programs: ``program`` (one fit's program: grid, solve, metrics, J^T J), ``batch`` (it
-   mapped over many fits), ``cache`` (kept per process and on disk);
+4. solvers, one family per file: ``solve`` (the solve of one start by its family), ``solver_lm``
+   (``lm``, brdffit's bounded Levenberg-Marquardt as an optimistix solver), ``solver_optx``
+   (optimistix's stock ``optx_lm``, ``gauss_newton``, ``dogleg``, ``bfgs`` on an unconstrained
+   variable), ``solver_scipy`` (scipy's TRF, the reference);
+5. compiled programs: ``stages`` (start, round and finish, one lane per start), ``lanes`` (how a backend
+   runs them: chunks, lanes, rounds), ``state``, ``cache`` (kept per process and on disk);
 6. the driver: ``options`` (``FitOptions``, checked once), ``driver`` (every fit runs there:
    ``solve`` -> ``Solved``, one row per fit with its status code; ``fit_measurements`` ->
    FitResults), ``api`` (the public ``fit`` and ``fit_batch``; ``brdffit.fit_btf`` calls the

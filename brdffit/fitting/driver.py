@@ -39,10 +39,11 @@ from . import init as _init
 from . import lanes as _lanes
 from .cache import compiled
 from .options import FitOptions
-from .problem import Data, Prepared, data_unit, in_unit, loss_values, prepare, resolve_model, stack
+from .objective import loss_values
+from .problem import Data, Prepared, data_unit, in_unit, prepare, resolve_model, stack_data
 from .._fit_defaults import STATUS_TEXT
 from .space import ParameterSpace, fit_warnings, sample_spacing
-from .structure import gauss_newton_matrix
+from .objective import gauss_newton_matrix
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
@@ -329,7 +330,7 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     preps = [prepare(m, weights) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
     space = options.space(mdl)
-    data = stack([p.data for p in preps])
+    data = stack_data([p.data for p in preps])
     # problem.data_unit: 1, or a power of ten for a table far from reflectance's range under a loss a unit
     # only rescales (one for a batch, whose bounds are shared); results come back in the table's unit.
     unit = data_unit(mdl, options.loss, data)

@@ -38,7 +38,7 @@ from ..models.base import Model, Param
 from . import losses as L
 from .linalg import spd_solve
 from .problem import Data
-from .structure import basis_fn, separable
+from .objective import basis_fn, separable
 
 POINTS_ROUGHNESS = 10
 #: Roughness values shared by repeated lobes (their strictly increasing pairs: 45 for 10 values; 8 values missed the best basin of vch_golden_yellow).

@@ -1,4 +1,5 @@
-"""The least-squares problem shared by every solver: data arrays, residual functions.
+"""The least-squares problem's data, shared by every solver: a measurement as arrays (``Data``), a batch of
+them, the model resolved for their channels, the unit a fit is solved in (its residuals: ``objective``).
 
 The measurement enters compiled code only as *arguments* (``Data``), never as constants, so one
 compiled solver serves every data set of the same shape (all UBO-81 tables, all BTF texels).
@@ -235,7 +236,7 @@ def _prepare_on_device(values, shared, w0):
     return ref, floor, total, jnp.all(mask == mask[:1])
 
 
-def stack(parts) -> Data:
+def stack_data(parts) -> Data:
     """One batch ``Data`` of several fits' (each from :func:`prepare`): ``ref`` and ``floor`` with a leading
     fit axis; ``wi``, ``wo``, ``sqrt_w``, ``cos_i`` held once where every fit has the same (a batch of one:
     always)."""
@@ -247,62 +248,6 @@ def stack(parts) -> Data:
         else:
             out.append(rows[0])
     return Data(*out)
-
-
-def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
-    wi, wo, ref, sqrt_w, cos_i, floor = data
-    f = model.eval(params, wi, wo)
-    return L.residual(loss, f, ref, cos_i, sqrt_w, floor).reshape(-1)
-
-
-@functools.lru_cache(maxsize=None)
-def flat_residual(model: Model, loss: str):
-    """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
-
-    def fn(v, data):
-        return residual_of_params(model, loss, model.unflatten(v), data)
-
-    return fn
-
-
-@functools.lru_cache(maxsize=None)
-def loss_values_fn(model: Model):
-    """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
-    return jax.jit(loss_values(model))
-
-
-@functools.lru_cache(maxsize=None)
-def loss_values(model: Model):
-    """flat params, data -> every loss's value and the metrics (jit-able)."""
-
-    def fn(v, data, losses=L.LOSSES):
-        wi, wo = data[0], data[1]
-        return values_metrics(model.eval(model.unflatten(v), wi, wo), data, losses)
-
-    return fn
-
-
-def values_metrics(f, data: Data, losses=L.LOSSES) -> dict:
-    """The value of each loss in ``losses`` and the metrics of model values f (N, C) against the
-    data (jit-able). A fit reports its own loss only: the cube root of the ``cbrt`` loss alone
-    cost more than a solver step (XLA's ``pow`` on 2 x 19,683 values, ~1 ms on UBO-81)."""
-    wi, wo, ref, sqrt_w, cos_i, floor = data
-    out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in losses}
-    # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
-    used = (sqrt_w > 0).astype(f.dtype)
-    n = jnp.sum(used) * f.shape[1]
-    d = (f - ref) * used
-    out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-    out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
-    out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
-    out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
-    out["max_abs_error"] = jnp.max(jnp.abs(d))
-    return out
-
-
-def evaluate(model: Model, params, data: Data) -> dict[str, float]:
-    v = model.flatten(params)
-    return {k: float(x) for k, x in loss_values_fn(model)(v, data).items()}
 
 
 # -- the data's unit ---------------------------------------------------------------------------------

@@ -8,7 +8,8 @@ from collections.abc import Sequence
 
 from ..errors import UsageError
 from ..measurement import Measurement
-from .problem import evaluate, prepare
+from .objective import evaluate
+from .problem import prepare
 from .result import FitResult
 
 

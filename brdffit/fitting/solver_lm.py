@@ -23,7 +23,7 @@ import optimistix as optx
 
 from ..models.base import Model
 from .linalg import inverse_quadratic_form, spd_solve
-from .problem import flat_residual
+from .objective import flat_residual
 from .state import Resume
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
@@ -58,7 +58,7 @@ class _LMState(eqx.Module):
 def _normal_equations(fn, y, args):
     """Loss r.r, gradient J^T r and Gauss-Newton matrix J^T J at y for any residual ``fn``, with
     the Jacobian by forward mode (the generic route; a fit passes the structured
-    ``structure.normal_equations`` of its model instead)."""
+    ``objective.normal_equations`` of its model instead)."""
     def f(u):
         r = fn(u, args)[0]
         return r, r
@@ -97,7 +97,7 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     atol: float = 0.0
     norm: Callable = optx.max_norm
     #: (y, args) -> (r.r, J^T r, J^T J) of the residual; None: forward mode over every entry of y.
-    #: ``structure.normal_equations`` gives a model's exact, cheaper form.
+    #: ``objective.normal_equations`` gives a model's exact, cheaper form.
     normal_equations: Callable | None = eqx.field(static=True, default=None)
 
     def _normal(self, fn, y, args):
@@ -202,7 +202,7 @@ def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
     is that round's v).
     ``Resume.c`` is the loss at v, ``Resume.H`` J^T J there, ``Resume.c0`` the loss at the first start;
     ``done``: the solver's own test passed."""
-    from .structure import normal_equations
+    from .objective import normal_equations
 
     fn = flat_residual(model, loss)
     ne = normal_equations(model, loss)

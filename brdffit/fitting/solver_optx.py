@@ -14,7 +14,7 @@ import numpy as np
 import optimistix as optx
 
 from ..models.base import Model, _fold
-from .problem import flat_residual
+from .objective import flat_residual
 from .solver_lm import status_code
 
 
@@ -71,7 +71,7 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
     ``name`` (``Resume``: the loss at v and at v0, J^T J at v; the damping entries 0: a stock solve does
     not continue); ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
     from .state import Resume
-    from .structure import gauss_newton_matrix
+    from .objective import gauss_newton_matrix
 
     fn = flat_residual(model, loss)
     solver = stock_solver(name, rtol, atol)

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .cache import compiled
-from .problem import flat_residual
+from .objective import flat_residual
 
 
 def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):

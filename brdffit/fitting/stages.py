@@ -33,7 +33,8 @@ from .._fit_defaults import SOLVERS
 from ..errors import UsageError
 from ..models.base import Model
 from . import init as _init
-from .problem import Data, flat_residual, values_metrics
+from .objective import flat_residual, values_metrics
+from .problem import Data
 
 
 #: Solvers that run compiled (and vectorise): everything but scipy.
@@ -79,9 +80,9 @@ def map_lanes(fn, lane_args, data: Data, lanes: int):
 
 
 def shared_geometry(model: Model, data: Data):
-    """The direction-only terms of a separable model (``structure.precompute_geometry``) when every lane
+    """The direction-only terms of a separable model (``objective.precompute_geometry``) when every lane
     shares its directions (a BTF's texels): computed once per call, outside the lanes' loop; else None."""
-    from .structure import precompute_geometry
+    from .objective import precompute_geometry
 
     lane = per_lane(data)
     if lane.wi or lane.wo:
@@ -140,7 +141,8 @@ def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, 
     (``resume`` is None); else from the previous round's ``resume`` (``state.Resume``, one row per
     lane). A stock solver (not resumable) runs ``max_steps`` in its one round; its ``resume`` holds the loss
     at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
-    from .solve import fit_constants, solve_one  # optimistix: imported only when a program is traced
+    from .objective import fit_constants
+    from .solve import solve_one  # optimistix: imported only when a program is traced
 
     solve = solve_one(model, loss, solver, rtol, atol, max_steps)
 
@@ -163,8 +165,7 @@ def finish_stage(model: Model, loss: str, metrics: bool, jtj: bool, lanes: int):
     """run(v (L, P), data) -> dict: ``loss`` (L,) at v afresh, ``floor`` (L,) the loss of an exact fit
     (``solve.fit_constants``); with ``metrics`` every metric (dict of (L,)), with ``jtj`` J^T J (L, P, P)
     (the standard errors' need)."""
-    from .solve import fit_constants
-    from .structure import model_values, normal_equations
+    from .objective import fit_constants, model_values, normal_equations
 
     model_at = model_values(model)
     ne = normal_equations(model, loss)

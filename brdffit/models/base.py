@@ -187,7 +187,7 @@ class Model:
     closed upper hemisphere (use the double-``where`` pattern for branches). Channel c of the
     result may depend on channel c of a 3-channel parameter only (formulas written with
     broadcasting do), and f_r must be affine in the parameters declared ``linear``: the solver
-    computes its Jacobians with that structure (``brdffit.fitting.structure``), and
+    computes its Jacobians with that structure (``brdffit.fitting.objective``), and
     ``brdffit.testing.model_problems`` checks both.
     """
 

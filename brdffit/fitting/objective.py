@@ -1,4 +1,11 @@
-"""The normal equations of one solver step, computed with the structure every BRDF model shares.
+"""The fit's objective: everything a solver evaluates of a model against the data (``problem.Data``).
+
+- the residual (``flat_residual``: the loss's per-sample residuals at a flat parameter vector), the
+  loss values and metrics of model values (``values_metrics``: every FitResult's metrics);
+- the constants a fit computes once (``fit_constants``: g(f_ref), the direction-only terms, the loss
+  of an exact fit) and its loss by the step's route (``model_loss``, ``model_values``);
+- the normal equations of one solver step (``normal_equations``), computed with the structure every
+  BRDF model shares, as follows.
 
 A step of a least-squares solver needs the loss r.r, the gradient J^T r and the Gauss-Newton
 matrix J^T J of the residual r (N samples x C channels, flattened) with respect to the flat
@@ -27,7 +34,7 @@ The loss enters through g'(f) (every loss is elementwise in f): J = diag(dr/df) 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import functools
 
@@ -37,7 +44,7 @@ import numpy as np
 
 from ..models.base import Model
 from . import losses as L
-from .problem import Data, flat_residual
+from .problem import Data
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Array, Float
@@ -175,6 +182,104 @@ def normal_equations(model: Model, loss: str):
         return jnp.sum(r * r), g, H
 
     return structured
+
+
+# -- the residual, the loss values and metrics, the constants of a fit ---------------------------------
+
+def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    f = model.eval(params, wi, wo)
+    return L.residual(loss, f, ref, cos_i, sqrt_w, floor).reshape(-1)
+
+
+@functools.lru_cache(maxsize=None)
+def flat_residual(model: Model, loss: str):
+    """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
+
+    def fn(v, data):
+        return residual_of_params(model, loss, model.unflatten(v), data)
+
+    return fn
+
+
+@functools.lru_cache(maxsize=None)
+def loss_values_fn(model: Model):
+    """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
+    return jax.jit(loss_values(model))
+
+
+@functools.lru_cache(maxsize=None)
+def loss_values(model: Model):
+    """flat params, data -> every loss's value and the metrics (jit-able)."""
+
+    def fn(v, data, losses=L.LOSSES):
+        wi, wo = data[0], data[1]
+        return values_metrics(model.eval(model.unflatten(v), wi, wo), data, losses)
+
+    return fn
+
+
+def values_metrics(f, data: Data, losses=L.LOSSES) -> dict:
+    """The value of each loss in ``losses`` and the metrics of model values f (N, C) against the
+    data (jit-able). A fit reports its own loss only: the cube root of the ``cbrt`` loss alone
+    cost more than a solver step (XLA's ``pow`` on 2 x 19,683 values, ~1 ms on UBO-81)."""
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in losses}
+    # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
+    used = (sqrt_w > 0).astype(f.dtype)
+    n = jnp.sum(used) * f.shape[1]
+    d = (f - ref) * used
+    out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
+    out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
+    out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
+    out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
+    out["max_abs_error"] = jnp.max(jnp.abs(d))
+    return out
+
+
+def evaluate(model: Model, params, data: Data) -> dict[str, float]:
+    v = model.flatten(params)
+    return {k: float(x) for k, x in loss_values_fn(model)(v, data).items()}
+
+
+class FitConstants(NamedTuple):
+    """What every step of one fit reads and nothing changes (computed once per fit)."""
+
+    g_ref: jax.Array  # the loss's transform of the measured values (``losses.reference_transform``)
+    geometry: Any  # a separable model's direction-only terms (:func:`precompute_geometry`), or None
+    loss_floor: jax.Array  # () the loss of an exact fit (residuals at roundoff level)
+
+
+def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitConstants:
+    """What every step of a fit shares and computes once (jit-able): g(f_ref) of the loss
+    (``losses.reference_transform``), the direction-only terms of a separable model
+    (:func:`precompute_geometry`, or None; ``geometry``: already computed, for the directions
+    a batch's fits share), and the loss of an exact fit relative to the data ((1e-13)^2 x the loss of
+    f = 0: residuals at roundoff level)."""
+    wi, wo, ref, sqrt_w, cos_i, floor = data
+    if geometry is None:
+        geometry = precompute_geometry(model, data)
+    # Computed with the channels first, (C, N): XLA vectorises the last axis, and N x 3 it runs as N
+    # rows of three (ggx/UBO-81's log transform: 0.49 -> 0.09 ms, a fifth of a texel's solve).
+    # Materialised once: XLA would otherwise recompute g(f_ref) (a log1p per value) inside every
+    # fusion that reads it (loss floor, start, result check, metrics).
+    ref_t, cos_t, sqrt_w_t, floor_t = ref.T, cos_i.T, sqrt_w.T, floor[:, None]
+    g_t, geometry = jax.lax.optimization_barrier((L.reference_transform(loss, ref_t, cos_t, floor_t), geometry))
+    r0 = L.residual(loss, jnp.zeros_like(ref_t), ref_t, cos_t, sqrt_w_t, floor_t, g_t)
+    return FitConstants(None if g_t is None else g_t.T, geometry, 1e-26 * jnp.sum(r0 * r0))
+
+
+def model_loss(model: Model, loss: str):
+    """loss_of(v, data, consts): the fit's loss at v, the model's values by the step's route
+    (:func:`model_values`: model.eval costs ~10x more on ggx/UBO-81)."""
+    values = model_values(model)
+
+    def loss_of(v, data, consts):
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        r = L.residual(loss, values(v, data, consts.geometry), ref, cos_i, sqrt_w, floor, consts.g_ref)
+        return jnp.sum(r * r)
+
+    return loss_of
 
 
 def _split_vector(model: Model):
