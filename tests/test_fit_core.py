@@ -273,17 +273,17 @@ def test_fit_batch_matches_single_fits():
 
 
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
-    """seconds: compile and run of the grid start plus those of each scipy solve (time shifted by
-    known amounts here, so that the sums cannot hold by chance of zero compile times)."""
+    """seconds: compile and run of the grid start and of the finish plus those of each scipy solve (time
+    shifted by known amounts here, so that the sums cannot hold by chance of zero compile times)."""
     from brdffit.fitting import lanes, solver_scipy
 
-    seen = {"init": [], "solve": []}
+    seen = {"start": [], "finish": [], "solve": []}
     real_stage, real_solve = lanes.run_stage, solver_scipy.solve_scipy
 
     def run_stage(key, *a, **kw):
         out, c_s, r_s = real_stage(key, *a, **kw)
-        assert key[0] == "start"  # the grid of starts: scipy's only compiled stage
-        seen["init"].append((c_s + 1.0, r_s + 2.0))
+        assert key[0] in ("start", "finish")  # scipy's compiled stages: the grid of starts, the finish
+        seen[key[0]].append((c_s + 1.0, r_s + 2.0))
         return out, c_s + 1.0, r_s + 2.0
 
     def solve_scipy(*a, **kw):
@@ -294,11 +294,12 @@ def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     monkeypatch.setattr(lanes, "run_stage", run_stage)
     monkeypatch.setattr(solver_scipy, "solve_scipy", solve_scipy)
     r = fit(_measurement(n=200), "ggx", solver="scipy", multistart=2)
-    assert len(seen["init"]) == 1 and len(seen["solve"]) == 3
-    (c_init, r_init), = seen["init"]
+    assert len(seen["start"]) == 1 and len(seen["solve"]) == 3 and len(seen["finish"]) >= 1
+    (c_init, r_init), = seen["start"]
+    stages = seen["start"] + seen["finish"]
     assert r.seconds["init"] == pytest.approx(c_init + r_init)
-    assert r.seconds["compile"] == pytest.approx(c_init + sum(c for c, _ in seen["solve"]))
-    assert r.seconds["run"] == pytest.approx(r_init + sum(t for _, t in seen["solve"]))
+    assert r.seconds["compile"] == pytest.approx(sum(c for c, _ in stages + seen["solve"]))
+    assert r.seconds["run"] == pytest.approx(sum(t for _, t in stages + seen["solve"]))
 
 
 def test_lm_fits_take_the_structured_normal_equations(monkeypatch):
@@ -344,8 +345,8 @@ def test_progress_hears_every_phase_and_compiling_only_when_it_compiles():
 def test_progress_hears_the_start_grid_compile_on_the_scipy_path():
     notes = []
     fit(_measurement(n=137), "lambert", loss="l2", solver="scipy", progress=notes.append)  # shapes of its own
-    assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "solved"], notes
-    assert notes[2].startswith("compiling: start (")
+    assert [n.split(":")[0] for n in notes] == ["initialising", "solving", "compiling", "compiling", "solved"], notes
+    assert notes[2].startswith("compiling: start (") and notes[3].startswith("compiling: finish (")
 
 
 def test_an_unknown_solver_name_is_named_by_make_solver():

@@ -78,13 +78,13 @@ def group_tiles(btf: BTF, tiles) -> list[list[int]]:
 
 def load_tiles(btf: BTF, tiles, mdl, options):
     """The prepared data of ``tiles`` (their texels one after another, row-major in each tile), ready for
-    :func:`fit_tiles`: (Data in the solve's unit, the space there, the unit, each tile's (h, w)). The
+    :func:`fit_tiles`: (Data, the space, the unit the fits are solved in, each tile's (h, w)). The
     values stay float32 (``problem.prepare_values``: the directions and weights the texels share held
     once); on an accelerator the per-texel arrays are sent to it here, so that a caller preparing the next
     tiles in a thread overlaps their transfer with the current solve."""
     import jax
 
-    from ..fitting.problem import data_unit, in_unit, prepare_values, prepare_values_device
+    from ..fitting.problem import data_unit, prepare_values, prepare_values_device
     from ..grid import ubo_pairs
 
     wi, wo = ubo_pairs()
@@ -103,12 +103,9 @@ def load_tiles(btf: BTF, tiles, mdl, options):
             btf.tile_values(t, out=values[s:e])
         data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True)
     del values
-    space = options.space(mdl)
     # The unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
-    # reflectance's range); the maps come back in the BTF's.
-    unit = data_unit(mdl, options.loss, data)
-    data, space = in_unit(data, unit), space.in_unit(unit)
-    return data, space, unit, shapes
+    # reflectance's range): the driver solves in it and gives the maps back in the BTF's.
+    return data, options.space(mdl), data_unit(mdl, options.loss, data), shapes
 
 
 def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=None,
@@ -128,7 +125,7 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
     n = int(offsets[-1])
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
-    run = _Texels(data, space, options, clock)
+    run = _Texels(data, space, unit, options, clock)
 
     def fit(texels, starts=None):
         return _fit_texels(run, texels, starts)
@@ -151,9 +148,6 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
         keep = again[better]
         flat[keep] = v[better]
         out["loss"][keep], out["converged"][keep], out["steps"][keep] = value[better], converged[better], steps[better]
-    if unit != 1.0:
-        flat *= np.where(space.linear_mask(), unit, 1.0)
-        out["loss"] *= _loss_scale(options.loss, unit)
     results = []
     for (h, w), s, e in zip(shapes, offsets[:-1], offsets[1:]):
         tile = {key: a[s:e].reshape(h, w) for key, a in out.items()}
@@ -166,10 +160,12 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
 
 
 class _Texels(NamedTuple):
-    """What the passes over a group of tiles share: their prepared data, the space, the options, a clock."""
+    """What the passes over a group of tiles share: their prepared data, the space, the unit the fits are
+    solved in, the options, a clock."""
 
     data: object
     space: object
+    unit: float
     options: object
     clock: dict | None
 
@@ -180,7 +176,8 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
     (n, P), loss, converged, steps."""
     from ..fitting.driver import solve
 
-    res = solve(run.space, run.options, run.data, fits=texels, starts=starts, grid=starts is None, results=False)
+    res = solve(run.space, run.options, run.data, unit=run.unit, fits=texels, starts=starts, grid=starts is None,
+                results=False)
     if run.clock is not None:
         run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]
         run.clock["solve"] = run.clock.get("solve", 0.0) + res.seconds["run"]
@@ -190,9 +187,3 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
 def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:
     """:func:`fit_tiles` of one tile."""
     return fit_tiles(btf, [t], mdl, options, neighbours)[0]
-
-
-def _loss_scale(loss: str, unit: float) -> float:
-    """The factor from a loss value in the solve's unit to the table's: the losses a unit only rescales
-    (``problem.data_unit``) are homogeneous in f, of degree 2 (l2, cosine_l2), 2/3 (cbrt) or 0 (relative)."""
-    return {"l2": unit**2, "cosine_l2": unit**2, "cbrt": unit ** (2.0 / 3.0)}.get(loss, 1.0)

@@ -14,29 +14,7 @@ from ..measurement import Measurement
 from ..models.base import Model
 from .driver import fit_measurements, with_warning
 from .options import FitOptions
-from .problem import resolve_model
 from .result import FitResult
-
-
-def start_vector(init, model: Model, space) -> np.ndarray:
-    """A flat start in ``space`` from "defaults", a params dict (missing parameters take their
-    defaults) or a FitResult."""
-    lo, hi = space.lo, space.hi
-    if isinstance(init, FitResult):
-        init = init.params
-    if isinstance(init, str):
-        if init != "defaults":
-            raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {init!r}")
-        return np.clip(model.default_vector(), lo, hi)
-    if not isinstance(init, Mapping):
-        raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {type(init).__name__}")
-    full = dict(model.defaults())
-    full.update({k: v for k, v in init.items()})
-    try:
-        v = np.asarray(model.flatten(full))
-    except ValueError as exc:
-        raise UsageError(f"init: {exc}") from None
-    return np.clip(v, lo, hi)
 
 
 def fit(
@@ -84,9 +62,12 @@ def fit(
         scene_note = _coverage_note(scene, measurement)
     options = FitOptions(loss=loss, solver=solver, max_steps=max_steps, rtol=rtol, atol=atol, multistart=multistart,
                          scipy_jac=scipy_jac, bounds=bounds, fixed=fixed, physical=physical)
-    mdl = resolve_model(model, measurement.n_channels)
-    starts = None if init is None else start_vector(init, mdl, options.space(mdl))[None, :]
-    result, = fit_measurements([measurement], mdl, options, result_type=FitResult, weights=weights, starts=starts,
+    if isinstance(init, FitResult):
+        init = init.params
+    elif init is not None and not isinstance(init, (str, Mapping)):
+        raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {type(init).__name__}")
+    result, = fit_measurements([measurement], model, options, result_type=FitResult, weights=weights,
+                               starts=None if init is None else [init],
                                grid=init is None, check_given=init is not None,
                                note=progress or (lambda _message: None))
     return with_warning(result, scene_note)
@@ -126,20 +107,16 @@ def fit_batch(
     if len(shapes) != 1:
         raise UsageError(f"fit_batch: all measurements need the same samples and channels, got {sorted(shapes)}")
     n = len(measurements)
-    mdl = resolve_model(model, measurements[0].n_channels)
     if starts is not None:
         if len(starts) != n:
             raise UsageError(f"fit_batch: {len(starts)} starts for {n} measurements")
-        space = options.space(mdl)
-        starts = np.stack([np.asarray(s, np.float64).reshape(-1) if not isinstance(s, (dict, FitResult))
-                           else start_vector(s, mdl, space) for s in starts])
-        if starts.shape[1] != mdl.n_free:
-            raise UsageError(f"fit_batch: starts have {starts.shape[1]} values, model {mdl.name} has {mdl.n_free}")
+        starts = [s.params if isinstance(s, FitResult) else s for s in starts]
     if not grid and starts is None:
         raise UsageError("fit_batch: grid=False needs starts")
-    with progress_bar(f"fit_batch {mdl.name}", n, shown=progress) as bar:
-        return fit_measurements(measurements, mdl, options, result_type=FitResult, starts=starts, grid=grid,
-                                progress=lambda fraction: bar.advance(fraction * n))
+    name = model.name if isinstance(model, Model) else str(model)
+    with progress_bar(f"fit_batch {name}", n, shown=progress) as bar:
+        return fit_measurements(measurements, model, options, result_type=FitResult, starts=starts, grid=grid,
+                                progress=lambda fraction: bar.advance(fraction * n), who="fit_batch")
 
 
 #: Below this fraction of a scene's weight covered by the data, a scene-weighted fit says so.

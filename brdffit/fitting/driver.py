@@ -10,7 +10,8 @@ methods call, so it does not import that class). What
 
 1. starts: the variable-projection grid and any given starts, the best ``k`` of each fit
    (``stages.start_stage``), or the given starts alone;
-2. the solves, one lane per start, in rounds (``lanes.solve_rounds``); the best lane of each fit;
+2. the solves, one lane per start, in rounds (``lanes.solve_rounds``; ``scipy``: in Python, one start after
+   another, ``solver_scipy.solve_lanes``); the best lane of each fit;
 3. lobes the data do not see (switched off, or a needle between the samples: ``init.unseen_lobes``) tried
    again at every roughness, scored on every sample; the fit keeps what lowers its loss;
 4. the finish (``stages.finish_stage``): the loss afresh where the solver's own is not exact, metrics and
@@ -18,10 +19,10 @@ methods call, so it does not import that class). What
 5. the status tests: the solver's test, a result no worse than its start, a model that cannot reach the
    data (every scale on a bound, rel_rmse near 1), a given start that ends far above the default's.
 
-``scipy`` runs in Python, one start after another (``solver_scipy``), after the same grid. Every solve
-minimises the loss it reports, in the table's own unit: a table far from reflectance's range is solved in
-a unit of its own only under a loss whose objective a unit merely rescales (``problem.data_unit``: not
-``log``), and its results are given back in the table's.
+Every solve minimises the loss it reports, in the table's own unit: a table far from reflectance's range is
+solved in a unit of its own only under a loss whose objective a unit merely rescales (``problem.data_unit``:
+not ``log``), and :func:`solve` gives its results back in the table's (for FitResults, the loss, metrics and
+J^T J of the table itself).
 """
 
 from __future__ import annotations
@@ -30,20 +31,17 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-import jax.numpy as jnp
 import numpy as np
 
+from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
 from . import lanes as _lanes
-from .cache import compiled
 from .options import FitOptions
-from .objective import loss_values
-from .problem import Data, Prepared, data_unit, in_unit, prepare, resolve_model, stack_data
+from .problem import Data, Prepared, data_unit, in_unit, loss_in_unit, prepare, resolve_model, stack_data
 from .._fit_defaults import STATUS_TEXT
 from .space import ParameterSpace, fit_warnings, sample_spacing
-from .objective import gauss_newton_matrix
 
 #: Condition number of J'J above which standard errors are not reported.
 STDERR_MAX_COND = 1e12
@@ -58,7 +56,7 @@ def _quiet(_message: str) -> None:
 
 
 class Solved(NamedTuple):
-    """What the solves found, one row per fit (NumPy, the fit axis first), in the solve's unit."""
+    """What the solves found, one row per fit (NumPy, the fit axis first), in the table's unit."""
 
     v: np.ndarray  # (n, P) canonical lobe order, fixed entries exact
     loss: np.ndarray  # (n,) the fit's loss at v
@@ -88,13 +86,13 @@ def _in_canonical_order(space: ParameterSpace, v: np.ndarray, jtj: np.ndarray | 
 class _Run:
     """One call of :func:`solve`: the space, the options, the data and the plan its stages share."""
 
-    def __init__(self, space: ParameterSpace, options: FitOptions, data: Data, note):
+    def __init__(self, space: ParameterSpace, options: FitOptions, data: Data, note, seconds: dict | None = None):
         self.space, self.options, self.data, self.note = space, options, data, note
         self.model = space.model
         self.plan = _lanes.plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
         self.anchor = space.clip(self.model.default_vector())
-        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0}
+        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
     def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
         self.seconds["compile"] += compile_s
@@ -124,8 +122,14 @@ class _Run:
 
     def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> _lanes.Rounds:
         o = self.options
-        r = _lanes.solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                                self.bounds, self.plan, progress=progress, note=self.note)
+        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
+            from .solver_scipy import solve_lanes
+
+            r = solve_lanes(self.model, o.loss, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
+                            max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
+        else:
+            r = _lanes.solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+                                    self.bounds, self.plan, progress=progress, note=self.note)
         self._count(r.compile_s, r.run_s)
         return r
 
@@ -145,12 +149,14 @@ def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
     return np.arange(n) * k + np.argmin(key, axis=1)
 
 
-def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.ndarray | None = None,
+def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float = 1.0, fits: np.ndarray | None = None,
           starts: np.ndarray | None = None, grid: bool = True, results: bool = True, check_given: bool = False,
           note: Callable[[str], None] = _quiet, progress=None) -> Solved:
     """Fit the fits ``fits`` (rows of the per-fit fields; default: all) of ``data`` (``Data``: ref and floor
     with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;
-    the results' rows follow ``fits``. ``starts``: (len(fits), P) given starts, ranked beside the grid's
+    the results' rows follow ``fits``. ``unit``: the unit the fits are solved in (``problem.data_unit`` of
+    the table: 1, or a power of ten); ``data``, ``space``, ``starts`` and every result are in the table's.
+    ``starts``: (len(fits), P) given starts, ranked beside the grid's
     points (``grid``), or the only ones. ``results``: also every metric and J^T J (for FitResults; else the
     loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
     not converged when it ends far above that (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with
@@ -159,10 +165,13 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.nd
     fits = np.arange(int(np.shape(data.ref)[0])) if fits is None else np.asarray(fits)
     n, P = len(fits), model.n_free
     k = options.starts(model)
-    if options.solver == "scipy":
-        return _solve_scipy(space, options, data, fits, starts, grid, k, note)
-    run = _Run(space, options, data, note)
-    given = np.zeros((n, 0, P)) if starts is None else np.asarray(starts, np.float64).reshape(n, 1, P)
+    unscale = np.where(space.linear_mask(), unit, 1.0)
+    table = _Run(space, options, data, note)
+    # The solves, in the solve's unit (a copy of the values when it is not 1: a table far from
+    # reflectance's range under a loss a unit only rescales).
+    run = table if unit == 1.0 else _Run(space.in_unit(unit), options, in_unit(data, unit), note, table.seconds)
+    space = run.space
+    given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, 1, P)
     if grid:
         grid_size = len(_init.cached_grid(model, *run.bounds, run.anchor))
         k = max(1, min(k, grid_size + given.shape[1]))
@@ -192,15 +201,19 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.nd
 
     notes = {}
     metrics = None
+    # J^T J that the solver did not give (scipy's lanes) or gave not finite: the finish computes it.
+    fresh_jtj = results and not np.all(np.isfinite(jtj))
     if results or options.solver != "lm":
         # The solver's claim checked on the loss evaluated afresh (lm's own loss is exact: it only ever
         # moves to a point of lower loss, so a BTF's maps need no finish).
-        out = run.finish(v, fits, metrics=results, jtj=False)
+        out = run.finish(v, fits, metrics=results and unit == 1.0, jtj=fresh_jtj)
+        if fresh_jtj:
+            jtj = out.pop("jtj")
         ok, code = result_check(out["loss"], start_loss, v, code, out["floor"])
         if not ok.all():  # a point worse than its start (or not finite) gives way to the start
             bad = np.flatnonzero(~ok)
             v[bad] = np.where(space.free, np.clip(start[bad], space.lo, space.hi), run.anchor)
-            again = run.finish(v[bad], fits[bad], metrics=results, jtj=True)
+            again = run.finish(v[bad], fits[bad], metrics=results and unit == 1.0, jtj=True)
             jtj[bad] = again.pop("jtj")
             for key, value in again.items():
                 if isinstance(value, dict):
@@ -214,6 +227,13 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, fits: np.nd
     if check_given and starts is not None and not grid:
         _far_from_default(run, fits, v, loss, code, notes)
     v, jtj = _in_canonical_order(space, v, jtj)
+    if unit != 1.0:  # back in the table's unit: the loss, metrics and J^T J of the table there
+        v, start = table.space.clip(v * unscale), start * unscale
+        if results:
+            out = table.finish(v, fits, metrics=True, jtj=True)
+            loss, metrics, jtj = out["loss"], out["metrics"], out["jtj"]
+        else:
+            loss = loss * loss_in_unit(options.loss, unit)
     return Solved(v, loss, code, steps, start, metrics, jtj, run.seconds, k, notes)
 
 
@@ -285,61 +305,29 @@ def _far_from_default(run: _Run, fits: np.ndarray, v: np.ndarray, loss: np.ndarr
                          f"times the default start's ({default_loss[i]:.6g}): start from the default (init=None)")
 
 
-def _solve_scipy(space: ParameterSpace, options: FitOptions, data: Data, fits: np.ndarray, starts, grid: bool, k: int,
-                 note) -> Solved:
-    """scipy's least_squares from the k best grid points (the start stage, as every fit's) or the given
-    start of each fit, in Python, one start after another."""
-    from . import solver_scipy  # scipy: imported only when a scipy fit runs
-    from .stages import per_lane
-
-    model, n, P = space.model, len(fits), space.model.n_free
-    lo, hi, free = space.lo, space.hi, space.free
-    run = _Run(space, options, data, note)
-    if grid:
-        k = max(1, min(k, len(_init.cached_grid(model, *run.bounds, run.anchor))))
-        candidates = run.starts(fits, np.zeros((n, 0, P)), k)
-    else:
-        candidates = np.asarray(starts, np.float64).reshape(n, 1, P)
-    rows = {key: [] for key in ("v", "loss", "code", "steps", "start")}
-    lane = per_lane(data)
-    for i, row in enumerate(fits):
-        one = Data(*(np.asarray(a)[row] if m else np.asarray(a) for a, m in zip(data, lane)))
-        best = None
-        for v0 in candidates[i]:
-            v0 = space.clip(v0)
-            v, value, code, steps, c_s, r_s = solver_scipy.solve_scipy(
-                model, options.loss, v0, one, lo, hi, free, rtol=options.rtol, atol=options.atol,
-                max_steps=options.max_steps, jac=options.scipy_jac)
-            run._count(c_s, r_s)
-            if best is None or value < best[1]:
-                best = (v, value, code, steps, v0)
-        for key, x in zip(rows, best):
-            rows[key].append(x)
-    v, _ = _in_canonical_order(space, np.asarray(rows["v"], np.float64), None)
-    return Solved(v, np.asarray(rows["loss"]), np.asarray(rows["code"]), np.asarray(rows["steps"]),
-                  np.asarray(rows["start"]), None, None, run.seconds, candidates.shape[1], {})
-
-
 def fit_measurements(measurements: Sequence[Measurement], model: str | Model, options: FitOptions, *,
                      result_type: type, weights=None, starts=None, grid: bool = True, check_given: bool = False,
-                     note: Callable[[str], None] = _quiet, progress=None) -> list:
+                     note: Callable[[str], None] = _quiet, progress=None, who: str = "fit") -> list:
     """Fit ``model`` to each measurement (same samples and channels) with ``options``; one
-    ``result_type`` (:class:`brdffit.FitResult`) each. ``starts``: (n, P) flat vectors in the table's unit
-    (already in the space), or None;
-    ``check_given``: see :func:`solve`. ``progress(fraction)``: called as the solves finish."""
+    ``result_type`` (:class:`brdffit.FitResult`) each. ``starts``: one start per measurement, each
+    "defaults", a params dict or a flat vector (P,) in the table's unit (``ParameterSpace.start``), or None;
+    ``check_given``: see :func:`solve`. ``progress(fraction)``: called as the solves finish. ``who``: the
+    caller named in the messages of bad starts."""
     preps = [prepare(m, weights) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
     space = options.space(mdl)
+    try:
+        given = None if starts is None else np.stack([space.start(s) for s in starts])
+    except UsageError as exc:
+        raise UsageError(f"{who}: {exc}") from None
     data = stack_data([p.data for p in preps])
     # problem.data_unit: 1, or a power of ten for a table far from reflectance's range under a loss a unit
     # only rescales (one for a batch, whose bounds are shared); results come back in the table's unit.
     unit = data_unit(mdl, options.loss, data)
-    unscale = np.where(space.linear_mask(), unit, 1.0)
-    given = None if starts is None else np.asarray(starts, np.float64) / unscale
     note("initialising: grid of starts" if grid else "initialising: the given start")
     note(f"solving: {options.solver}, {options.starts(mdl) if grid else 1} start(s)")
-    res = solve(space.in_unit(unit), options, in_unit(data, unit), starts=given, grid=grid, results=True,
-                check_given=check_given, note=note, progress=progress)
+    res = solve(space, options, data, unit=unit, starts=given, grid=grid, results=True, check_given=check_given,
+                note=note, progress=progress)
     n = len(measurements)
     if n == 1:
         note(f"solved: {int(res.steps[0])} steps, loss {float(res.loss[0]):.6g}, {STATUS_TEXT[int(res.code[0])]}")
@@ -349,33 +337,19 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
         record.update(batch=True)
     if unit != 1.0:
         record["data_unit"] = unit
-    # else metrics, J^T J and loss afresh, in the table's unit (scipy: always)
-    given_back = unit == 1.0 and res.metrics is not None
-    # space.clip: fixed entries exactly at their values after the unit's round trip
-    results = [fit_result(result_type, space, options, m, prep, space.clip(res.v[i] * unscale), int(res.code[i]),
-                          int(res.steps[i]), res.start[i] * unscale, seconds=seconds, options_record=record,
-                          value=float(res.loss[i]) if given_back else None,
-                          metrics={key: float(x[i]) for key, x in res.metrics.items()} if given_back else None,
-                          jtj=res.jtj[i] if given_back else None)
+    results = [fit_result(result_type, space, options, m, prep, res.v[i], int(res.code[i]), int(res.steps[i]),
+                          res.start[i], seconds=seconds, options_record=record, value=float(res.loss[i]),
+                          metrics={key: float(x[i]) for key, x in res.metrics.items()}, jtj=res.jtj[i])
                for i, (m, prep) in enumerate(zip(measurements, preps))]
     return [with_warning(r, res.notes.get(i)) for i, r in enumerate(results)]
 
 
 def fit_result(result_type: type, space: ParameterSpace, options: FitOptions, measurement: Measurement, prep: Prepared,
-               v, code: int, steps: int, v0, *, seconds, options_record, value=None, metrics=None, jtj=None):
-    """The ``result_type`` (FitResult) of one fit at ``v`` (the table's unit); metrics, J^T J and the loss
-    computed here where the solve did not give them in that unit."""
+               v, code: int, steps: int, v0, *, seconds, options_record, value: float, metrics: dict, jtj):
+    """The ``result_type`` (FitResult) of one fit at ``v``, with its loss ``value``, ``metrics`` and ``jtj``
+    (all in the table's unit: :func:`solve`'s)."""
     m, loss = space.model, options.loss
     params = {k: a.copy() for k, a in m.unflatten(np.asarray(v, dtype=np.float64)).items()}
-    if metrics is None or jtj is None:
-        # Through the disk cache, like the solve (a second process traces nothing).
-        args = (jnp.asarray(v, dtype=jnp.float64), prep.data)
-        metrics_fn, _ = compiled(("metrics", m, loss), lambda: lambda v, d: loss_values(m)(v, d, (loss,)), *args)
-        jtj_fn, _ = compiled(("jtj", m, loss), lambda: gauss_newton_matrix(m, loss), *args)
-        metrics = {k: float(x) for k, x in metrics_fn(*args).items()}
-        jtj = np.asarray(jtj_fn(*args))
-    if value is None:
-        value = metrics[loss]
     stderr = standard_errors(m, params, jtj, value, prep.n_used * prep.channels, space.lo, space.hi, space.free)
     ref = np.asarray(prep.data.ref)[prep.used]  # the data's unit (see ParameterSpace.at_bound)
     at_bound = space.at_bound(v, data_scale=float(np.mean(np.abs(ref))) if ref.size else None)

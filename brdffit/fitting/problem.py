@@ -294,6 +294,12 @@ def data_unit(model: Model, loss: str, data: Data) -> float:
     return float(10.0 ** round(np.log10(mean / CANONICAL_MEAN)))
 
 
+def loss_in_unit(loss: str, unit: float) -> float:
+    """The factor from a loss value in the solve's unit (:func:`data_unit`) to the table's: the losses a unit
+    only rescales are homogeneous in f, of degree 2 (l2, cosine_l2), 2/3 (cbrt) or 0 (relative)."""
+    return {"l2": unit**2, "cosine_l2": unit**2, "cbrt": unit ** (2.0 / 3.0)}.get(loss, 1.0)
+
+
 def in_unit(data: Data, unit: float) -> Data:
     """``data`` with its values (and the loss floors that follow them) divided by ``unit``."""
     if unit == 1.0:

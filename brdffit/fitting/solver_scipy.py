@@ -1,5 +1,7 @@
 """``scipy``: scipy.optimize.least_squares (TRF), the reference baseline (docs/fitting.md#fitting), run in Python
-one start at a time (the JAX residual and Jacobian compiled through the program cache)."""
+one start at a time (the JAX residual and Jacobian compiled through the program cache). The fit driver runs
+it where the compiled solvers run their rounds (:func:`solve_lanes`): the starts, the re-seeding, the finish
+and the status tests around it are every fit's."""
 
 from __future__ import annotations
 
@@ -10,14 +12,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from .cache import compiled
+from .lanes import Rounds
 from .objective import flat_residual
+from .problem import Data
 
 
 def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):
     """scipy.optimize.least_squares (TRF, bounded) on the free parameters of the flat vector.
 
     ``jac="exact"`` uses the JAX Jacobian (jit-compiled); "2-point"/"3-point" scipy's finite
-    differences. Returns (v, loss value, status code, steps (function evaluations), compile s, run s).
+    differences. Returns (v, loss value, status code, steps (function evaluations), the loss at the
+    start, compile s, run s).
     """
     from scipy.optimize import least_squares
 
@@ -38,7 +43,8 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
     # absolute gradient test stopped at 1e7 times the optimum's loss, and at x1e12 the kd ~ 1e11 hid
     # alpha's steps from its relative step test.
     r0 = np.asarray(res(jnp.asarray(v_full), data))
-    size = float(np.sqrt(r0 @ r0))
+    start_value = float(r0 @ r0)
+    size = float(np.sqrt(start_value))
     size = size if np.isfinite(size) and size > 0 else 1.0
 
     def f(u):
@@ -59,4 +65,25 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
     code = 0 if sol.status > 0 else (1 if sol.status == 0 else 4)
     if not (np.all(np.isfinite(v)) and np.isfinite(value)):
         v, value, code = v_full, float(np.sum(f(v_full[free]) ** 2)) * size**2, 3
-    return v, value, code, int(sol.nfev), c1 + c2, run_s
+    return v, value, code, int(sol.nfev), start_value, c1 + c2, run_s
+
+
+def solve_lanes(model, loss: str, v0: np.ndarray, data: Data, fits: np.ndarray, bounds: tuple, *, rtol: float,
+                atol: float, max_steps: int, jac: str, progress=None) -> Rounds:
+    """:func:`solve_scipy` from each start ``v0`` (L, P) on row ``fits[i]`` of the per-fit fields, one after
+    another: the lanes of ``lanes.solve_rounds``, with no J^T J (NaN: the driver's finish computes it)."""
+    from .stages import per_lane
+
+    lo, hi, free = bounds
+    lane = per_lane(data)
+    rows = []
+    for start, row in zip(v0, fits):
+        one = Data(*(np.asarray(a)[row] if m else np.asarray(a) for a, m in zip(data, lane)))
+        rows.append(solve_scipy(model, loss, start, one, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps,
+                                jac=jac))
+        if progress is not None:
+            progress(1 / len(fits))
+    v, value, code, steps, start_value, c_s, r_s = (np.asarray(x) for x in zip(*rows)) if rows else [np.zeros(0)] * 7
+    P = len(lo)
+    return Rounds(v.reshape(-1, P), value, start_value, np.full((len(rows), P, P), np.nan), code.astype(int),
+                  steps.astype(int), float(np.sum(c_s)), float(np.sum(r_s)))

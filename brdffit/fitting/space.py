@@ -165,6 +165,24 @@ class ParameterSpace:
         scale = np.where(self.linear_mask(), 1.0 / unit, 1.0)
         return dataclasses.replace(self, lo=self.lo * scale, hi=self.hi * scale, values=self.values * scale)
 
+    def start(self, init) -> np.ndarray:
+        """A flat start in this space from "defaults", a params dict (missing parameters take their
+        defaults) or a flat vector (P,) in the model's order."""
+        model = self.model
+        if isinstance(init, str):
+            if init != "defaults":
+                raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {init!r}")
+            return self.clip(model.default_vector())
+        if isinstance(init, Mapping):
+            try:
+                return self.clip(model.flatten({**model.defaults(), **init}))
+            except ValueError as exc:
+                raise UsageError(f"init: {exc}") from None
+        v = np.asarray(init, np.float64).reshape(-1)
+        if v.shape[0] != model.n_free:
+            raise UsageError(f"starts have {v.shape[0]} values, model {model.name} has {model.n_free}")
+        return self.clip(v)
+
     def clip(self, v) -> np.ndarray:
         """A flat vector moved into the box, fixed entries at their values."""
         v = np.clip(np.asarray(v, dtype=np.float64), self.lo, self.hi)
