@@ -37,7 +37,7 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
-from . import lanes as _lanes
+from .lanes import Stages
 from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_in_unit, prepare, resolve_model, stack_data
 from .._fit_defaults import STATUS_TEXT
@@ -70,79 +70,6 @@ class Solved(NamedTuple):
     notes: dict  # fit index -> one sentence on its status (a model that cannot reach the data ...)
 
 
-def _in_canonical_order(space: ParameterSpace, v: np.ndarray, jtj: np.ndarray | None):
-    """Fixed entries exactly at their values, lobes of one kind narrowest first (a swap of whole
-    interchangeable lobes: f_r and the loss are unchanged; J^T J follows the swap)."""
-    v = np.where(space.free, np.clip(v, space.lo, space.hi), space.values)
-    if not space.order:
-        return v, jtj
-    perms = np.stack([space.canonical_order(row) for row in v])
-    v = np.take_along_axis(v, perms, axis=1)
-    if jtj is not None:
-        jtj = np.stack([h[np.ix_(p, p)] for h, p in zip(jtj, perms)])
-    return v, jtj
-
-
-class _Run:
-    """One call of :func:`solve`: the space, the options, the data and the plan its stages share."""
-
-    def __init__(self, space: ParameterSpace, options: FitOptions, data: Data, note, seconds: dict | None = None):
-        self.space, self.options, self.data, self.note = space, options, data, note
-        self.model = space.model
-        self.plan = _lanes.plan(options.chunk, options.lanes)
-        self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
-        self.anchor = space.clip(self.model.default_vector())
-        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
-
-    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
-        self.seconds["compile"] += compile_s
-        self.seconds["run"] += run_s
-        if init:
-            self.seconds["init"] += compile_s + run_s
-
-    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None):
-        """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
-        each fit's own: ``grids`` (n, G, m)) and the ``given`` (n, E, P), ranked on ``subset``'s rows."""
-        from .stages import start_stage
-
-        o = self.options
-        lo, hi, free = self.bounds
-        if grids is None:
-            points = _init.cached_grid(self.model, lo, hi, free, self.anchor)
-            lane_args = given
-        else:
-            points, lane_args = np.zeros((0, 0)), (grids, given)
-        if subset is None:
-            subset = _init.subset_rows(Data(*(a if a.ndim == r else a[0] for a, r in zip(self.data, (2, 2, 2, 2, 2, 1)))))
-        key = (self.model, o.loss, k, True, self.plan.lanes)
-        out, c_s, r_s = _lanes.run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
-                                         (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)
-        self._count(c_s, r_s, init=True)
-        return out[0]
-
-    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> _lanes.Rounds:
-        o = self.options
-        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
-            from .solver_scipy import solve_lanes
-
-            r = solve_lanes(self.model, o.loss, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
-                            max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
-        else:
-            r = _lanes.solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                                    self.bounds, self.plan, progress=progress, note=self.note)
-        self._count(r.compile_s, r.run_s)
-        return r
-
-    def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
-        from .stages import finish_stage
-
-        key = (self.model, self.options.loss, metrics, jtj, self.plan.lanes)
-        out, c_s, r_s = _lanes.run_stage(("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (),
-                                         self.plan, note=self.note)
-        self._count(c_s, r_s)
-        return out
-
-
 def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
     """The lane index (into n*k lanes, fit-major) of each fit's lowest finite loss."""
     key = np.where(np.isfinite(loss), loss, np.inf).reshape(n, k)
@@ -166,19 +93,14 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     n, P = len(fits), model.n_free
     k = options.starts(model)
     unscale = np.where(space.linear_mask(), unit, 1.0)
-    table = _Run(space, options, data, note)
+    table = Stages(space, options, data, note)
     # The solves, in the solve's unit (a copy of the values when it is not 1: a table far from
     # reflectance's range under a loss a unit only rescales).
-    run = table if unit == 1.0 else _Run(space.in_unit(unit), options, in_unit(data, unit), note, table.seconds)
+    run = table if unit == 1.0 else Stages(space.in_unit(unit), options, in_unit(data, unit), note, table.seconds)
     space = run.space
     given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, 1, P)
-    if grid:
-        grid_size = len(_init.cached_grid(model, *run.bounds, run.anchor))
-        k = max(1, min(k, grid_size + given.shape[1]))
-        candidates = run.starts(fits, given, k)
-    else:
-        k = 1
-        candidates = given
+    candidates = run.starts(fits, given, k) if grid else given
+    k = candidates.shape[1]
     r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress)
     best = _best_of(r.loss, n, k)
     v, loss, code, steps = r.v[best], r.loss[best], r.code[best], r.steps[best].copy()
@@ -226,7 +148,7 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     _unreached(run, fits, v, metrics, code, notes)
     if check_given and starts is not None and not grid:
         _far_from_default(run, fits, v, loss, code, notes)
-    v, jtj = _in_canonical_order(space, v, jtj)
+    v, jtj = space.canonical_rows(v, jtj)
     if unit != 1.0:  # back in the table's unit: the loss, metrics and J^T J of the table there
         v, start = table.space.clip(v * unscale), start * unscale
         if results:
@@ -256,7 +178,7 @@ def result_check(value, l0, v, code, loss_floor):
     return ok, code
 
 
-def _unreached(run: _Run, fits: np.ndarray, v: np.ndarray, metrics: dict | None, code: np.ndarray, notes: dict) -> None:
+def _unreached(run: Stages, fits: np.ndarray, v: np.ndarray, metrics: dict | None, code: np.ndarray, notes: dict) -> None:
     """A fit whose every scale (linear parameter: reflectances, albedos) ended on a bound while rel_rmse is
     near 1 or above has not reached the data: the model cannot reach the data's level within its bounds (a
     table in another unit than a native model's reflectances <= 1 allow: x1e12 left every native model at
@@ -286,7 +208,7 @@ def _unreached(run: _Run, fits: np.ndarray, v: np.ndarray, metrics: dict | None,
                              "the data's level within its bounds (is the table in another unit?)")
 
 
-def _far_from_default(run: _Run, fits: np.ndarray, v: np.ndarray, loss: np.ndarray, code: np.ndarray,
+def _far_from_default(run: Stages, fits: np.ndarray, v: np.ndarray, loss: np.ndarray, code: np.ndarray,
                       notes: dict) -> None:
     """A converged fit from a given start also solved from the default start: far above it, it is not
     converged (its solver's test passed, but in a basin the default start leaves)."""

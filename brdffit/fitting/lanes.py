@@ -15,6 +15,9 @@ How a backend is used (:func:`plan`, unless the caller sets ``chunk`` and ``lane
 - GPU (and other accelerators): one call holds up to ``DEVICE_CHUNK`` lanes, all vectorised; the
   lane axis is split over the process's devices.
 
+The fit driver runs its stages through :class:`Stages` (one per call: the space, options, data and plan
+they share, the seconds they take).
+
 Solver rounds (:func:`solve_rounds`): a vectorised solve runs every lane until its slowest is done, so
 the solver runs at most ``ROUND_STEPS`` steps per call; between calls the lanes that are done leave
 and the others continue from their state (``solver_lm.Resume``) exactly where they were.
@@ -230,3 +233,69 @@ def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_st
         if progress is not None and ended:
             progress(ended / n)
     return Rounds(v, state.c, state.c0, state.H, out["code"], out["steps"], compile_s, run_s)
+
+
+class Stages:
+    """The stages of one call of the fit driver (``driver.solve``) run here: the space, the options, the data
+    and the plan they share, and the seconds they take (compile, run; the starts' also as "init").
+    :meth:`starts` (the start stage), :meth:`solve` (every lane's solve: the compiled solvers' rounds,
+    scipy's in Python) and :meth:`finish` (the finish stage)."""
+
+    def __init__(self, space, options, data: Data, note, seconds: dict | None = None):
+        self.space, self.options, self.data, self.note = space, options, data, note
+        self.model = space.model
+        self.plan = plan(options.chunk, options.lanes)
+        self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
+        self.anchor = space.clip(self.model.default_vector())
+        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
+
+    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
+        self.seconds["compile"] += compile_s
+        self.seconds["run"] += run_s
+        if init:
+            self.seconds["init"] += compile_s + run_s
+
+    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None):
+        """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
+        each fit's own: ``grids`` (n, G, m)) and the ``given`` (n, E, P), ranked on ``subset``'s rows; fewer
+        (at least one) where there are not k of them."""
+        from .init import cached_grid, subset_rows
+        from .stages import start_stage
+
+        o = self.options
+        lo, hi, free = self.bounds
+        if grids is None:
+            points = cached_grid(self.model, lo, hi, free, self.anchor)
+            lane_args = given
+        else:
+            points, lane_args = np.zeros((0, 0)), (grids, given)
+        k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
+        if subset is None:
+            subset = subset_rows(Data(*(a if a.ndim == r else a[0] for a, r in zip(self.data, (2, 2, 2, 2, 2, 1)))))
+        key = (self.model, o.loss, k, True, self.plan.lanes)
+        out, c_s, r_s = run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
+                                  (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)
+        self._count(c_s, r_s, init=True)
+        return out[0]
+
+    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> Rounds:
+        o = self.options
+        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
+            from .solver_scipy import solve_lanes
+
+            r = solve_lanes(self.model, o.loss, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
+                            max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
+        else:
+            r = solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+                             self.bounds, self.plan, progress=progress, note=self.note)
+        self._count(r.compile_s, r.run_s)
+        return r
+
+    def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
+        from .stages import finish_stage
+
+        key = (self.model, self.options.loss, metrics, jtj, self.plan.lanes)
+        out, c_s, r_s = run_stage(("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
+                                  note=self.note)
+        self._count(c_s, r_s)
+        return out

@@ -188,6 +188,19 @@ class ParameterSpace:
         v = np.clip(np.asarray(v, dtype=np.float64), self.lo, self.hi)
         return np.where(self.free, v, self.values)
 
+    def canonical_rows(self, v: np.ndarray, jtj: np.ndarray | None = None):
+        """Fits' results (rows of ``v`` (n, P), and their J^T J (n, P, P) or None) with fixed entries exactly at
+        their values and the lobes of one kind narrowest first (a swap of whole interchangeable lobes: f_r and
+        the loss are unchanged; J^T J follows the swap)."""
+        v = np.where(self.free, np.clip(v, self.lo, self.hi), self.values)
+        if not self.order:
+            return v, jtj
+        perms = np.stack([self.canonical_order(row) for row in v])
+        v = np.take_along_axis(v, perms, axis=1)
+        if jtj is not None:
+            jtj = np.stack([h[np.ix_(p, p)] for h, p in zip(jtj, perms)])
+        return v, jtj
+
     def canonical(self, v) -> np.ndarray:
         """``v`` (float64) with the lobes of every interchangeable group sorted narrowest first
         (whole lobes swapped: f_r is unchanged). Stable: lobes of equal width keep their order."""
