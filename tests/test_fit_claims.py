@@ -44,18 +44,20 @@ def test_a_single_fit_is_a_batch_of_one_on_a_three_lobe_model(paint):
         np.testing.assert_allclose(batch.params[name], one.params[name], rtol=1e-10, atol=1e-14)
 
 
-@pytest.mark.parametrize("path", ["fit_batch", "fit"])
+@pytest.mark.parametrize("path", ["fit_batch", "fit", "scipy"])
 def test_a_needle_lobe_is_tried_again_on_every_path(paint, path):
     """A solve started on a needle stays there (a local minimum the samples barely see) and used to report
-    it converged, 6 % above the narrow highlight's loss; the needle is re-seeded at every roughness."""
+    it converged, 6 % above the narrow highlight's loss; the needle is re-seeded at every roughness, whatever
+    the solver (scipy's fits once skipped it: they ran a path of their own)."""
     best = brdffit.fit(paint, "ggx")
     assert best.params["alpha"][0] == pytest.approx(0.0148, rel=0.05)
     if path == "fit_batch":
         r = brdffit.fit_batch([paint], "ggx", starts=[NEEDLE], grid=False)[0]
     else:
-        r = brdffit.fit(paint, "ggx", init=NEEDLE)
+        r = brdffit.fit(paint, "ggx", init=NEEDLE, solver="scipy" if path == "scipy" else "lm")
     assert r.params["alpha"][0] == pytest.approx(0.0148, rel=0.05)
-    assert r.loss_value == pytest.approx(best.loss_value, rel=1e-6) and r.converged
+    # scipy's own stopping test ends within its tolerance of the optimum, not at lm's last digits
+    assert r.loss_value == pytest.approx(best.loss_value, rel=1e-6 if path != "scipy" else 1e-4) and r.converged
 
 
 def _log_loss_at(kd: np.ndarray, table: brdffit.Measurement) -> float:
@@ -86,14 +88,15 @@ def test_the_loss_minimised_is_the_loss_reported_on_a_mirror_table():
 
 
 @pytest.mark.parametrize("scale", [1e12, 1e-12])
-@pytest.mark.parametrize("model", ["gltf:metallic_roughness", "mitsuba:principled"])
-def test_a_native_model_that_cannot_reach_the_data_is_not_converged(model, scale):
+@pytest.mark.parametrize(("model", "solver"), [("gltf:metallic_roughness", "lm"), ("mitsuba:principled", "lm"),
+                                               ("gltf:metallic_roughness", "scipy")])
+def test_a_native_model_that_cannot_reach_the_data_is_not_converged(model, solver, scale):
     """Reflectances <= 1 cannot reach a table x1e12 (nor come down to x1e-12 with every lobe on): every scale
-    on a bound, rel_rmse ~1 (or 1e9): not converged, with the sentence that says why."""
+    on a bound, rel_rmse ~1 (or 1e9): not converged, with the sentence that says why, whatever the solver."""
     from brdffit.sample import generate
 
     m = generate()
-    r = brdffit.fit(m.replace(values=np.asarray(m.values) * scale), model)
+    r = brdffit.fit(m.replace(values=np.asarray(m.values) * scale), model, solver=solver)
     assert r.metrics["rel_rmse"] > 0.5
     assert not r.converged and r.status_code == 5
     assert any("cannot reach the data's level" in w for w in r.warnings)

@@ -29,13 +29,13 @@ import dataclasses
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import NamedTuple
 
 import jax
 import numpy as np
 
 from .cache import compiled
 from .problem import Data
+from .state import Rounds
 
 #: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring). One lane at a
 #: time: vectorising is slower on 2 cores (a 64 x 64 ggx BTF, warm: 768-792 texels/s one lane at a time,
@@ -172,19 +172,6 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
             outs = list(pool.map(run, calls))
     result = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
     return result, compile_s, time.perf_counter() - t0
-
-
-class Rounds(NamedTuple):
-    """Every lane's solve after :func:`solve_rounds` (NumPy, the lane axis first)."""
-
-    v: np.ndarray  # (L, P) the solution
-    loss: np.ndarray  # (L,) the loss at v (the solver's route)
-    start_loss: np.ndarray  # (L,) the loss at the lane's start
-    jtj: np.ndarray  # (L, P, P) J^T J at v
-    code: np.ndarray  # (L,) status code
-    steps: np.ndarray  # (L,)
-    compile_s: float
-    run_s: float
 
 
 def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,

@@ -12,9 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .cache import compiled
-from .lanes import Rounds
 from .objective import flat_residual
 from .problem import Data
+from .state import Rounds
 
 
 def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):

@@ -1,6 +1,7 @@
-"""The state a solve continues from between rounds (``stages.round_stage``, ``solver_lm``).
+"""The state a solve continues from between rounds (``stages.round_stage``, ``solver_lm``), and what every
+lane's solve ends with (:class:`Rounds`: the compiled solvers' rounds and scipy's lanes give the same).
 
-A module of its own, importing JAX alone: a compiled round kept on disk names this type in its
+A module of its own, importing JAX and NumPy alone: a compiled round kept on disk names this type in its
 signature, and loading the program must import neither optimistix nor the solver.
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax
+import numpy as np
 
 
 class Resume(NamedTuple):
@@ -23,3 +25,16 @@ class Resume(NamedTuple):
     H: jax.Array
     lam: jax.Array
     nu: jax.Array
+
+
+class Rounds(NamedTuple):
+    """Every lane's solve after ``lanes.solve_rounds`` (or ``solver_scipy.solve_lanes``) (NumPy, the lane axis first)."""
+
+    v: np.ndarray  # (L, P) the solution
+    loss: np.ndarray  # (L,) the loss at v (the solver's route)
+    start_loss: np.ndarray  # (L,) the loss at the lane's start
+    jtj: np.ndarray  # (L, P, P) J^T J at v
+    code: np.ndarray  # (L,) status code
+    steps: np.ndarray  # (L,)
+    compile_s: float
+    run_s: float
