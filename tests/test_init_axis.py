@@ -63,3 +63,24 @@ def test_box_least_squares_matches_scipy_and_survives_a_column_the_data_do_not_s
     with_zero = solve(np.column_stack([A, np.zeros(40)]), np.append(lo, 0.0), np.append(hi, 1.0))
     assert np.all(np.isfinite(with_zero)), with_zero
     np.testing.assert_allclose(with_zero[:4], expected, atol=1e-9)
+
+
+@pytest.mark.parametrize(("model", "points"), [("mitsuba:principled", None), ("ggx", 30)])
+def test_a_reseeding_grid_is_bounded_and_keeps_every_roughness(model, points):
+    """A lobe re-seeded (``init.reseed_grids``) is scored on every sample: a product of its axes larger than
+    RESEED_MAX_POINTS (principled's one lobe: 10 x 3^5 = 2700, 7 s of a fit) is cut to that many points by a
+    fixed seed, with every roughness value still in it; a small product (ggx: 10 x 3) is kept whole."""
+    import brdffit
+    from brdffit.fitting.init import POINTS_ROUGHNESS, RESEED_MAX_POINTS, reseed_grids
+    from brdffit.fitting.options import FitOptions
+
+    m = brdffit.models.get(model)
+    space = FitOptions().space(m)
+    v = space.clip(m.default_vector())[None]
+    lobe = tuple(m.lobes[-1].params)
+    grids = reseed_grids(space, v, lobe)
+    assert grids.shape[1] == (points or RESEED_MAX_POINTS)
+    assert len(np.unique(grids, axis=1)[0]) == grids.shape[1]  # no point twice
+    roughness = [j for j, p in enumerate(q for q in m.params if not q.linear) if p.role == "roughness"]
+    assert len(np.unique(grids[0, :, roughness[0]])) == POINTS_ROUGHNESS
+    assert np.array_equal(reseed_grids(space, v, lobe), grids)  # the same points every time

@@ -359,11 +359,19 @@ def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str,
     return out
 
 
+#: Most points of a re-seeding grid (:func:`reseed_grids`). It is scored on every sample, not on the start
+#: grid's GRID_SAMPLES: 256 points on UBO-81's 6561 samples cost about what the start grid's 2048 on 768 do.
+#: A larger product (``mitsuba:principled``'s one lobe: 10 x 3^5 = 2700 points, 7.2 s of a fit on the
+#: bundled sample) is replaced by this many of its points drawn by a fixed seed (each roughness value still
+#: about 25 times there).
+RESEED_MAX_POINTS = 256
+
+
 def reseed_grids(space, v: np.ndarray, lobe: tuple[str, ...]) -> np.ndarray:
     """Grid points (n, G, nonlinear parameters) for :func:`vp_grid`, one grid per fit (rows of ``v``
     (n, P)): the fit with the nonlinear parameters named in ``lobe`` moved over the default grid's axes
-    (its roughness on POINTS_ROUGHNESS values, the others on POINTS_OTHER); the linear parameters are
-    solved again at each point."""
+    (its roughness on POINTS_ROUGHNESS values, the others on POINTS_OTHER; at most RESEED_MAX_POINTS of
+    them); the linear parameters are solved again at each point."""
     m = space.model
     v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
     slices = dict(m.slices())
@@ -376,6 +384,8 @@ def reseed_grids(space, v: np.ndarray, lobe: tuple[str, ...]) -> np.ndarray:
             cols.append(j)
             axes.append(_axis(p, space.lo[s.start], space.hi[s.start], _points(p)))
     combos = np.asarray(list(itertools.product(*axes)), dtype=np.float64).reshape(-1, len(cols))
+    if len(combos) > RESEED_MAX_POINTS:  # a fixed subset, as the start grid's (GRID_MAX_POINTS)
+        combos = combos[np.sort(np.random.default_rng(0).choice(len(combos), RESEED_MAX_POINTS, replace=False))]
     grids = np.repeat(base[:, None, :], len(combos), axis=1)
     grids[:, :, cols] = combos[None]
     return grids
