@@ -123,19 +123,21 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
 
     notes = {}
     metrics = None
-    # J^T J that the solver did not give (scipy's lanes) or gave not finite: the finish computes it.
-    fresh_jtj = results and not np.all(np.isfinite(jtj))
+    # Metrics, and J^T J that the solver did not give (scipy's lanes) or gave not finite, from this finish
+    # where the solve's data are the table's; in another unit the table's own finish below gives them.
+    report_here = results and unit == 1.0
+    fresh_jtj = report_here and not np.all(np.isfinite(jtj))
     if results or options.solver != "lm":
         # The solver's claim checked on the loss evaluated afresh (lm's own loss is exact: it only ever
         # moves to a point of lower loss, so a BTF's maps need no finish).
-        out = run.finish(v, fits, metrics=results and unit == 1.0, jtj=fresh_jtj)
+        out = run.finish(v, fits, metrics=report_here, jtj=fresh_jtj)
         if fresh_jtj:
             jtj = out.pop("jtj")
         ok, code = result_check(out["loss"], start_loss, v, code, out["floor"])
         if not ok.all():  # a point worse than its start (or not finite) gives way to the start
             bad = np.flatnonzero(~ok)
             v[bad] = np.where(space.free, np.clip(start[bad], space.lo, space.hi), run.anchor)
-            again = run.finish(v[bad], fits[bad], metrics=results and unit == 1.0, jtj=True)
+            again = run.finish(v[bad], fits[bad], metrics=report_here, jtj=True)
             jtj[bad] = again.pop("jtj")
             for key, value in again.items():
                 if isinstance(value, dict):

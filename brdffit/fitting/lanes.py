@@ -247,7 +247,7 @@ class Stages:
         each fit's own: ``grids`` (n, G, m)) and the ``given`` (n, E, P), ranked on ``subset``'s rows; fewer
         (at least one) where there are not k of them."""
         from .init import cached_grid, subset_rows
-        from .stages import start_stage
+        from .stages import per_lane, start_stage
 
         o = self.options
         lo, hi, free = self.bounds
@@ -258,7 +258,7 @@ class Stages:
             points, lane_args = np.zeros((0, 0)), (grids, given)
         k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
         if subset is None:
-            subset = subset_rows(Data(*(a if a.ndim == r else a[0] for a, r in zip(self.data, (2, 2, 2, 2, 2, 1)))))
+            subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
         key = (self.model, o.loss, k, True, self.plan.lanes)
         out, c_s, r_s = run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)

@@ -22,10 +22,9 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from ..models import get as get_model
 from ..models.base import Model
-from . import losses as L
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
-    from jaxtyping import Array, Float
+    from jaxtyping import Array
 
 
 class Data(NamedTuple):

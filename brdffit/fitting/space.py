@@ -192,7 +192,7 @@ class ParameterSpace:
         """Fits' results (rows of ``v`` (n, P), and their J^T J (n, P, P) or None) with fixed entries exactly at
         their values and the lobes of one kind narrowest first (a swap of whole interchangeable lobes: f_r and
         the loss are unchanged; J^T J follows the swap)."""
-        v = np.where(self.free, np.clip(v, self.lo, self.hi), self.values)
+        v = self.clip(v)
         if not self.order:
             return v, jtj
         perms = np.stack([self.canonical_order(row) for row in v])
