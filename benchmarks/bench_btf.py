@@ -8,15 +8,17 @@ loading the compiled programs from the disk cache), the second warm. In the same
 Printed: the device(s) JAX runs on; texels/s of both and their ratio; CPU time per texel; the solver's
 steps; the largest relative difference of fit_btf's loss from fit()'s on the sampled texels; where
 fit_btf's time went (reading and preparing tiles, in a thread beside the solves; compiling; the compiled
-stages, i.e. the device's share; the rest, Python on the host); the process's peak resident memory;
-with ``--device`` the accelerator's peak memory. ``--compare`` also runs ``fit_btf(..., neighbours=False)``
+stages, i.e. the device's share; the rest, Python on the host; with worker processes, ``--processes``,
+summed over them); the process's peak resident memory (and the workers');
+with ``--device`` the accelerator's peak memory. ``--one-process`` also runs ``fit_btf(..., processes=1)`` and
+prints the ratio to it. ``--compare`` also runs ``fit_btf(..., neighbours=False)``
 (every texel from the initialisation grid).
 
 The BTF is written straight into the tile cache (``btf.generate.model_btf``: no 6561 images to write
 and decode); ``--images`` writes the image folder and reads it with ``load_btf`` instead.
 
     python benchmarks/bench_btf.py [--size 64] [--loop 64] [--model ggx] [--tile 16] [--compare]
-                                   [--device] [--images]
+                                   [--device] [--images] [--processes N] [--one-process]
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import multiprocessing
+import os
 import resource
 import tempfile
 import time
@@ -34,6 +37,21 @@ import numpy as np
 
 def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and of fit_btf's worker processes (``brdffit.btf.processes``), from /proc."""
+    from brdffit.btf import processes
+
+    total = time.process_time()
+    pool = processes._POOL.get("pool")
+    for w in pool.workers if pool is not None else []:
+        try:
+            fields = Path(f"/proc/{w.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+        except (OSError, ValueError, IndexError):
+            pass
+    return total
 
 
 def generate(model_name: str, size: int, folder: str, tile: int, images: bool):
@@ -58,6 +76,10 @@ def main() -> None:
     ap.add_argument("--compare", action="store_true", help="also fit every texel from the grid (neighbours=False)")
     ap.add_argument("--device", action="store_true", help="also print the accelerator's figures (peak memory)")
     ap.add_argument("--images", action="store_true", help="write an image folder and read it with load_btf")
+    ap.add_argument("--processes", type=int, default=None,
+                    help="fit_btf's processes (default: its own choice; 1: this process alone)")
+    ap.add_argument("--one-process", action="store_true",
+                    help="also run fit_btf with processes=1 (first and warm) and print the ratio to it")
     args = ap.parse_args()
 
     import jax
@@ -96,24 +118,35 @@ def main() -> None:
                   f"= {loop_rate:.1f} texels/s (warm); CPU time {loop_cpu / len(sample) * 1e3:.2f} ms per texel")
 
         n = args.size * args.size
-        runs = [(True, "first"), (True, "warm")] + ([(False, "first"), (False, "warm")] if args.compare else [])
+        runs = [(True, "first", args.processes), (True, "warm", args.processes)]
+        runs += [(True, "first", 1), (True, "warm", 1)] if args.one_process else []
+        runs += [(False, "first", args.processes), (False, "warm", args.processes)] if args.compare else []
         rates = {}
-        for neighbours, which in runs:
-            t, cpu = time.perf_counter(), time.process_time()
-            maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours)
-            fit_s, cpu_s = time.perf_counter() - t, time.process_time() - cpu
-            rate = rates[neighbours, which] = n / fit_s
+        for neighbours, which, processes in runs:
+            t, cpu = time.perf_counter(), cpu_seconds()
+            maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours, processes=processes)
+            fit_s, cpu_s = time.perf_counter() - t, cpu_seconds() - cpu
+            rate = rates[neighbours, which, processes] = n / fit_s
             info = maps.info
+            workers = info.get("worker_processes")
             steps = maps.steps.ravel()
             counts = np.bincount(steps)
-            print(f"fit_btf (neighbours={neighbours}, {which} run): {n} texels in {fit_s:.2f} s = {rate:.1f} texels/s"
-                  f"{' (compile included)' if which == 'first' else ''}; CPU time {cpu_s / n * 1e3:.3f} ms per texel; "
-                  f"{int(maps.converged.sum())}/{n} converged")
+            print(f"fit_btf (neighbours={neighbours}, processes={processes}, {which} run): {n} texels in {fit_s:.2f} s = "
+                  f"{rate:.1f} texels/s{' (compile included)' if which == 'first' else ''}; CPU time "
+                  f"{cpu_s / n * 1e3:.3f} ms per texel{' (the workers included)' if workers else ''}; "
+                  f"{int(maps.converged.sum())}/{n} converged; "
+                  + (f"{workers} worker processes, peak RSS {info['worker_peak_rss_mb']:.0f} MB each at most"
+                     if workers else "in this process"))
             if loop_rate:
                 print(f"  ratio fit_btf / loop of fit: {rate / loop_rate:.1f}x")
-            print(f"  time: reading+preparing tiles {info['seconds_read']:.2f} s (a thread beside the solves), "
-                  f"compiling {info['seconds_compile']:.2f} s, compiled stages {info['seconds_solve']:.2f} s, "
-                  f"the rest (host, Python) {max(fit_s - info['seconds_compile'] - info['seconds_solve'], 0.0):.2f} s")
+            if which == "warm" and processes == 1 and (True, "warm", args.processes) in rates and args.processes != 1:
+                print(f"  ratio fit_btf (processes={args.processes}) / fit_btf (processes=1), warm: "
+                      f"{rates[True, 'warm', args.processes] / rate:.2f}x")
+            where = "summed over the workers, in them" if workers else "a thread beside the solves"
+            print(f"  time: reading+preparing tiles {info['seconds_read']:.2f} s ({where}), "
+                  f"compiling {info['seconds_compile']:.2f} s, compiled stages {info['seconds_solve']:.2f} s"
+                  + ("" if workers else f", the rest (host, Python) "
+                     f"{max(fit_s - info['seconds_compile'] - info['seconds_solve'], 0.0):.2f} s"))
             print(f"  steps: mean {steps.mean():.2f}, median {np.median(steps):.0f}, max {steps.max()}; texels per step "
                   "count " + ", ".join(f"{k}: {c}" for k, c in enumerate(counts) if c))
             if sample:
@@ -126,7 +159,8 @@ def main() -> None:
                     print(f"  device memory: peak {stats.get('peak_bytes_in_use', 0) / 2**30:.2f} GiB, "
                           f"in use {stats.get('bytes_in_use', 0) / 2**30:.2f} GiB")
         if args.compare:
-            print(f"neighbour starts vs grid starts (warm): {rates[True, 'warm'] / rates[False, 'warm']:.2f}x texels/s")
+            print(f"neighbour starts vs grid starts (warm): "
+                  f"{rates[True, 'warm', args.processes] / rates[False, 'warm', args.processes]:.2f}x texels/s")
         print(f"peak RSS of this process: {peak_rss_mb():.0f} MB")
 
 

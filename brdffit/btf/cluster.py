@@ -50,7 +50,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
-import pickle
 import socket
 import uuid
 import warnings
@@ -76,7 +75,7 @@ def fit_tiles(client, btf: BTF, job, todo: list[int], tiles_dir: Path | None) ->
     if not todo:
         return
     shipped = dataclasses.replace(btf, _owner=None)  # the description, not the owner of a temporary cache
-    packed = pickle.dumps((job.model, job.options, job.neighbours))
+    packed = _tile.pack_job(job.model, job.options, job.neighbours)
     folder = None if tiles_dir is None else str(Path(tiles_dir).absolute())
     token = uuid.uuid4().hex[:10]
     futures = {}
@@ -121,7 +120,7 @@ def fit_tile_task(btf: BTF, t: int, packed: bytes, tiles_dir: str | None, record
     worker = get_worker()
     here = {"tile": int(t), "pid": os.getpid(), "host": socket.gethostname(), "run": token}
     worker.log_event(EVENTS, {**here, "phase": "start"})
-    mdl, options, neighbours = _unpacked(packed)
+    mdl, options, neighbours = _tile.unpack_job(packed)
     try:
         arrays = _tile.fit_tile(readable(btf), t, mdl, options, neighbours)
     except InputError as exc:  # as a plain exception: InputError's (path, problem) do not survive pickling
@@ -141,13 +140,6 @@ class _WorkerInputError(Exception):
 
     def __str__(self) -> str:
         return f"{self.path}: {self.problem}" if self.path else self.problem
-
-
-@functools.lru_cache(maxsize=8)
-def _unpacked(packed: bytes):
-    """A job's model and options, unpickled once per worker process: every tile of the job then
-    uses the same objects, so their compiled program is made (or loaded) once."""
-    return pickle.loads(packed)
 
 
 def readable(btf: BTF) -> BTF:

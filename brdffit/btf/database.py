@@ -128,6 +128,7 @@ def fit_btf_database(
     force: bool = False,
     progress: bool | None = None,
     client=None,
+    processes: int | None = None,
     neighbours: bool = True,
     region=None,
     step: int = 1,
@@ -161,7 +162,7 @@ def fit_btf_database(
         shown = sys.stderr.isatty() if progress is None else bool(progress)
         with progress_bar(f"{record['model']} on {Path(folder).name}", sum(m.texels for m in left), shown=shown,
                           rate="texels") as bar:
-            plan = _Plan(out, model, loss, solver, neighbours, read, cache_dir, client, force, batch_options)
+            plan = _Plan(out, model, loss, solver, neighbours, read, cache_dir, client, processes, force, batch_options)
             for i, m in enumerate(left, 1):
                 # A material is a complete result once its params.exr (written last) is committed: an
                 # interrupt from that moment on keeps it (the CLI's Ctrl-C removes only what this
@@ -185,6 +186,7 @@ class _Plan:
     read: dict
     cache_dir: object
     client: object
+    processes: int | None
     force: bool
     options: dict
 
@@ -194,7 +196,8 @@ class _Plan:
         bar.describe(f"reading {where}")
         btf = load_btf(m.source, **self.read, cache_dir=self.cache_dir, name=m.name)
         job = tile_job(btf, self.model, self.loss, self.solver, self.neighbours, **self.options)
-        with open_run(btf, job, out=self.out / m.name, force=self.force, client=self.client) as run:
+        with open_run(btf, job, out=self.out / m.name, force=self.force, client=self.client,
+                      processes=self.processes) as run:
             bar.skip(run.texels(run.results))
             bar.describe(f"{job.model.name} on {where}")
             run.fit(bar)

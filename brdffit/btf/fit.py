@@ -98,6 +98,7 @@ def fit_btf(
     max_tiles: int | None = None,
     neighbours: bool = True,
     client=None,
+    processes: int | None = None,
     **batch_options,
 ) -> ParameterMaps:
     """Fit ``model`` to every texel of ``btf``; see the module docstring.
@@ -111,9 +112,11 @@ def fit_btf(
     (see :mod:`brdffit.btf.tile`); False starts every texel from the initialisation grid.
     ``client``: a ``dask.distributed.Client``; its cluster's workers fit the tiles (see
     :mod:`brdffit.btf.cluster`: ``out`` must then be on a file system the workers share).
+    ``processes``: on a CPU, worker processes of one core each fit the tiles (:mod:`brdffit.btf.processes`);
+    None: one per core where the system allows it and the run has texels enough to repay their start, 1: this process alone.
     """
     job = tile_job(btf, model, loss, solver, neighbours, **batch_options)
-    with open_run(btf, job, out=out, force=force, client=client) as run:
+    with open_run(btf, job, out=out, force=force, client=client, processes=processes) as run:
         enabled = sys.stderr.isatty() if progress is None else bool(progress)
         label = f"{job.model.name} on {btf.name}" + (f" (process {run.pid + 1}/{run.nproc})" if run.nproc > 1 else "")
         with progress_bar(label, run.texels(run.mine), shown=enabled, done=run.texels(run.results),
@@ -122,9 +125,9 @@ def fit_btf(
 
 
 @contextlib.contextmanager
-def open_run(btf: BTF, job: TileJob, *, out=None, force: bool = False, client=None):
+def open_run(btf: BTF, job: TileJob, *, out=None, force: bool = False, client=None, processes: int | None = None):
     """A :class:`TileRun` of ``job`` over ``btf``, its folder ``out`` checked, locked and read (the
-    tiles finished before); the lock is released when the block ends."""
+    tiles finished before); the lock is released when the block ends. ``processes``: see :func:`fit_btf`."""
     import jax
 
     nproc = jax.process_count()
@@ -144,7 +147,7 @@ def open_run(btf: BTF, job: TileJob, *, out=None, force: bool = False, client=No
                 held = _run.lock(tiles_dir)
                 if _run.read_run(tiles_dir) is None:
                     _run.write_run(tiles_dir, job.record)
-        yield TileRun(btf, job, out, tiles_dir, pid, nproc, client)
+        yield TileRun(btf, job, out, tiles_dir, pid, nproc, client, processes)
     finally:
         if held is not None:
             held.close()
@@ -152,9 +155,12 @@ def open_run(btf: BTF, job: TileJob, *, out=None, force: bool = False, client=No
 
 class TileRun:
     """One run over a BTF's tiles: those finished before (``results``, read from the run's folder)
-    and the others, fitted by :meth:`fit`. ``mine``: this process's share of the tiles."""
+    and the others, fitted by :meth:`fit`. ``mine``: this process's share of the tiles; ``processes``: the
+    worker processes that fit them (1: this process, see :func:`brdffit.btf.processes.count`)."""
 
-    def __init__(self, btf: BTF, job: TileJob, out, tiles_dir, pid: int, nproc: int, client):
+    def __init__(self, btf: BTF, job: TileJob, out, tiles_dir, pid: int, nproc: int, client, processes=None):
+        from . import processes as _processes
+
         self.btf, self.job, self.out, self.tiles_dir = btf, job, out, tiles_dir
         self.pid, self.nproc, self.client = pid, nproc, client
         self.mine = [t for t in range(btf.n_tiles) if t % nproc == pid]
@@ -165,6 +171,8 @@ class TileRun:
                 if got is not None:
                     self.results[t] = got
         self.resumed = len(self.results)
+        left = [t for t in self.mine if t not in self.results]
+        self.processes = _processes.count(processes, len(left), self.texels(left), client)
 
     def texels(self, tiles) -> int:
         """Texels in ``tiles``."""
@@ -202,6 +210,15 @@ class TileRun:
             from .cluster import fit_tiles
 
             yield from fit_tiles(self.client, self.btf, job, todo, self.tiles_dir)
+            return
+        if self.processes > 1:  # worker processes of a core each (processes.py); the files written here
+            from .processes import fitted
+
+            for t, arrays, where in fitted(self.btf, job, _tile.group_tiles(self.btf, todo, self.processes),
+                                           self.processes, self.clock):
+                if self.tiles_dir is not None:
+                    _run.save_tile(self.tiles_dir, t, arrays)
+                yield t, arrays, where
             return
         # Here: the tiles in groups (``tile.group_tiles``: a batch big enough for the backend's lanes), the
         # next group read and prepared in a thread while the current one is solved.
@@ -242,7 +259,9 @@ class TileRun:
                 # compiling and running the compiled stages (the device's share), the rest (Python between)
                 "seconds_read": self.clock["read"], "seconds_compile": self.clock["compile"],
                 "seconds_solve": self.clock["solve"],
-                "resumed_tiles": self.resumed, "neighbours": self.job.neighbours}
+                "resumed_tiles": self.resumed, "neighbours": self.job.neighbours,
+                "worker_processes": self.processes if self.processes > 1 else None,
+                "worker_peak_rss_mb": self.clock.get("worker_peak_rss_mb")}
         if self.client is not None:
             info["dask"] = {"scheduler": self.client.scheduler.address, "workers": len(workers)}
         pm = ParameterMaps(model=mdl.name, params=maps["params"], loss=maps["loss"], converged=maps["converged"],

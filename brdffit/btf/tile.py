@@ -62,17 +62,23 @@ def neighbour_passes(h: int, w: int, strides=STRIDES) -> list[tuple[np.ndarray, 
 #: Texels a group of tiles holds at least (``group_tiles``), per backend: on a CPU enough for every core's
 #: chunks of lanes, on an accelerator for one call of all its lanes.
 GROUP_TEXELS = {"cpu": 1024, "device": 32768}
+#: Groups per worker process at least (``group_tiles``): a worker that finishes early takes another, so
+#: that no core waits long for the slowest.
+GROUPS_PER_WORKER = 4
 
 
-def group_tiles(btf: BTF, tiles) -> list[list[int]]:
+def group_tiles(btf: BTF, tiles, workers: int = 1) -> list[list[int]]:
     """``tiles`` in groups fitted together (:func:`fit_tiles`), in order, each of at least GROUP_TEXELS
     texels (the last may hold fewer): a pass over one 16 x 16 tile is 16 to 192 texels, too few to keep
-    a machine's lanes busy."""
+    a machine's lanes busy. For ``workers`` processes of one core each (``processes``), groups small
+    enough that each worker gets several (a core's lanes are one at a time: any group keeps it busy)."""
     import jax
 
     backend = "cpu" if jax.local_devices()[0].platform == "cpu" else "device"
     per = max(1, -(-GROUP_TEXELS[backend] // (btf.tile * btf.tile)))
     tiles = list(tiles)
+    if workers > 1:
+        per = max(1, min(per, len(tiles) // (GROUPS_PER_WORKER * workers)))
     return [tiles[i : i + per] for i in range(0, len(tiles), per)]
 
 
@@ -182,6 +188,22 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
         run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]
         run.clock["solve"] = run.clock.get("solve", 0.0) + res.seconds["run"]
     return res.v, res.loss, res.code == 0, res.steps
+
+
+def pack_job(mdl, options, neighbours: bool) -> bytes:
+    """What fits a tile, for another process (a Dask worker, a worker process): :func:`unpack_job` there."""
+    import pickle
+
+    return pickle.dumps((mdl, options, bool(neighbours)), protocol=pickle.HIGHEST_PROTOCOL)
+
+
+@functools.lru_cache(maxsize=8)
+def unpack_job(packed: bytes):
+    """A packed job's model, options and neighbours, unpickled once per process: every tile of the job then
+    uses the same objects, so their compiled programs are made (or loaded) once."""
+    import pickle
+
+    return pickle.loads(packed)
 
 
 def fit_tile(btf: BTF, t: int, mdl, options, neighbours: bool = True) -> dict[str, np.ndarray]:

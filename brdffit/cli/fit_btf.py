@@ -49,10 +49,13 @@ def _region(text: str | None):
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Fit the tiles on the Dask cluster of the scheduler at ADDRESS (e.g. tcp://host:8786; needs "
                    "brdffit[cluster]). OUT, and --cache-dir or the BTF, on a file system the workers share.")
+@click.option("--processes", type=click.IntRange(1), default=None,
+              help="On a CPU, worker processes of one core each that fit the tiles; 1: this process alone "
+                   "[one per core, where the system allows it].")
 @click.option("-o", "--out", "out", default=None, type=click.Path(path_type=Path), help="Output folder [fitbtf-<name>-<model>].")
 @click.option("--force", is_flag=True, help="Replace an existing result (or the tiles of another run).")
-def fit_btf_command(folder, model, loss, solver, region, step, includes_cos, scale, tile, cache_dir, scheduler, out,
-                    force) -> int:
+def fit_btf_command(folder, model, loss, solver, region, step, includes_cos, scale, tile, cache_dir, scheduler,
+                    processes, out, force) -> int:
     """Fit MODEL to every texel of the BTF in FOLDER (an image folder or a .zip archive), or of
     every BTF in FOLDER when it holds several (a database: each into OUT/<name>/, with
     OUT/summary.csv and OUT/summary.json; run it again to resume)."""
@@ -66,7 +69,7 @@ def fit_btf_command(folder, model, loss, solver, region, step, includes_cos, sca
     out = out or Path(f"fitbtf-{src.stem}-{model.replace('+', '_')}")
     read = {"region": _region(region), "step": step, "includes_cos": includes_cos, "scale": scale, "tile": tile,
             "cache_dir": cache_dir}
-    options = {} if solver is None else {"solver": solver}
+    options = {**({} if solver is None else {"solver": solver}), **({} if processes is None else {"processes": processes})}
     run = _fit_database if is_database(src) else _fit_one
     if scheduler is None:
         return run(src, model, loss, out, force, read, options, client=None)
