@@ -32,9 +32,11 @@ from brdffit.btf.reader import BTF
 meta = json.loads(sys.argv[1])
 btf = BTF(**{**meta, "cache": Path(meta["cache"])})
 t = time.perf_counter()
-maps = brdffit.fit_btf(btf, sys.argv[2], progress=False)
+processes = None if sys.argv[3] == "auto" else int(sys.argv[3])
+maps = brdffit.fit_btf(btf, sys.argv[2], progress=False, processes=processes)
 seconds = time.perf_counter() - t
-print(json.dumps({"seconds": seconds, "peak_mb": peak_mb(),
+print(json.dumps({"seconds": seconds, "peak_mb": peak_mb(), "workers": maps.info["worker_processes"] or 0,
+                  "worker_peak_mb": maps.info["worker_peak_rss_mb"] or 0.0,
                   "converged": float(maps.converged.mean())}))
 """
 
@@ -51,12 +53,13 @@ print(json.dumps({"name": btf.name, "source": btf.source, "height": btf.height, 
 """
 
 
-def measure(side: int, tile: int, model: str, folder: str) -> dict:
+def measure(side: int, tile: int, model: str, folder: str, processes: str = "auto") -> dict:
     """Generate (a child) and fit (another child) a side x side BTF of ``model`` in tiles of ``tile``."""
     gen = subprocess.run([sys.executable, "-c", GENERATE, str(side), str(tile), model, folder], capture_output=True,
                          text=True, check=True)
     meta = gen.stdout.strip().splitlines()[-1]
-    run = subprocess.run([sys.executable, "-c", CHILD, meta, model], capture_output=True, text=True, check=True)
+    run = subprocess.run([sys.executable, "-c", CHILD, meta, model, processes], capture_output=True, text=True,
+                         check=True)
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
@@ -64,17 +67,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--model", default="ggx")
+    ap.add_argument("--processes", default="auto", help="fit_btf's processes (auto: its own choice; 1: the child alone)")
     args = ap.parse_args()
     for name in args.cases:
         side, tile, bound = CASES[name]
         with tempfile.TemporaryDirectory(prefix="bench-memory-") as d:
             t = time.perf_counter()
-            got = measure(side, tile, args.model, d)
+            got = measure(side, tile, args.model, d, args.processes)
             n = side * side
+            # With worker processes: the run's process and every worker at its peak at once (an upper bound).
+            total = got["peak_mb"] + got["workers"] * got["worker_peak_mb"]
+            workers = (f" + {got['workers']} worker processes of at most {got['worker_peak_mb']:.0f} MB each = "
+                       f"{total:.0f} MB at most" if got["workers"] else "")
             print(f"{name}: {side}x{side} {args.model} BTF, tile {tile}: {n} texels in {got['seconds']:.1f} s "
-                  f"({n / got['seconds']:.0f} texels/s), peak RSS {got['peak_mb']:.0f} MB (bound {bound * 1024:.0f} MB: "
-                  f"{'holds' if got['peak_mb'] <= bound * 1024 else 'SHORT'}); converged {got['converged']:.4f}; "
-                  f"with generation {time.perf_counter() - t:.0f} s")
+                  f"({n / got['seconds']:.0f} texels/s), peak RSS {got['peak_mb']:.0f} MB{workers} (bound "
+                  f"{bound * 1024:.0f} MB: {'holds' if total <= bound * 1024 else 'SHORT'}); converged "
+                  f"{got['converged']:.4f}; with generation {time.perf_counter() - t:.0f} s")
 
 
 if __name__ == "__main__":

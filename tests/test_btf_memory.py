@@ -30,7 +30,7 @@ def test_a_96x96_tile_is_fitted_in_2_gb(tmp_path, monkeypatch):
     assert btf.n_tiles == 1 and btf.memory()["tile"] > 690 * 2**20  # 9,216 x 6,561 x 3 float32
     meta = json.dumps({"name": btf.name, "source": btf.source, "height": btf.height, "width": btf.width,
                        "channels": btf.channels, "tile": btf.tile, "cache": str(btf.cache), "meta": btf.meta})
-    run = subprocess.run([sys.executable, "-c", bench.CHILD, meta, "lambert"], capture_output=True, text=True, timeout=900)
+    run = subprocess.run([sys.executable, "-c", bench.CHILD, meta, "lambert", "auto"], capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     got = json.loads(run.stdout.strip().splitlines()[-1])
     assert got["converged"] == 1.0

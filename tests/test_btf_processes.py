@@ -70,6 +70,15 @@ def test_workers_confined_to_a_core_each_give_the_maps_of_one_process(ggx_btf, o
     assert sorted(_cpus_allowed(p) for p in pids) == [str(c) for c in processes.cores()[:2]]
 
 
+def test_two_threads_runs_at_once_share_the_workers_in_turn(ggx_btf, one_process):
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        runs = [pool.submit(brdffit.fit_btf, ggx_btf, "ggx", progress=False, processes=2) for _ in range(2)]
+        for run in runs:
+            _assert_same_maps(run.result(timeout=300), one_process)
+
+
 def test_a_run_in_workers_resumes_from_its_tile_files(ggx_btf, one_process, tmp_path):
     out = tmp_path / "run"
     assert brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=2, out=out, max_tiles=5) is None

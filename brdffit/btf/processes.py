@@ -43,8 +43,9 @@ from pathlib import Path
 from ..errors import InputError, UsageError
 
 #: Texels a run fits at least for ``processes=None`` to start workers: a worker's start (Python, JAX, the
-#: compiled programs from the disk cache) takes about 1.5 s of a core (benchmarks/README.md), a 64 x 64
-#: ggx BTF about 5 s on 2 cores.
+#: compiled programs from the disk cache) takes about 1.2 s, a 64 x 64
+#: ggx BTF about 5 s on 2 cores. Measured (ggx, programs from the disk cache): two workers start and answer a
+#: first request of 64 texels in 1.37 s, 0.14 s once started.
 AUTO_MIN_TEXELS = 4096
 
 
@@ -84,6 +85,11 @@ def fitted(btf, job, groups: list[list[int]], workers: int, clock: dict) -> Iter
     """(tile, arrays, which worker) for every tile of ``groups``, as the ``workers`` processes finish
     them (a free worker takes the next group); their seconds are added to ``clock``. When the caller
     stops early (an error, an interrupt) the workers end: their requests are not waited for."""
+    with _BUSY:  # one run at a time talks to the workers (two threads' runs would mix their answers)
+        yield from _fitted(btf, job, groups, workers, clock)
+
+
+def _fitted(btf, job, groups, workers, clock):
     import dataclasses
 
     from .tile import pack_job
@@ -227,6 +233,7 @@ class _Pool:
 
 _POOL: dict[str, _Pool] = {}
 _LOCK = threading.Lock()
+_BUSY = threading.Lock()
 
 
 def _pool(workers: int) -> _Pool:
