@@ -173,7 +173,10 @@ class _Worker:
         """The fitted tiles of an answer, or the error it stands for (InputError for the input's)."""
         which = f"tiles {tiles[0]}-{tiles[-1]}" if len(tiles) > 1 else f"tile {tiles[0]}"
         if answer is None:
-            code = self.proc.poll()
+            try:  # its pipe closed as it died: its exit status a moment later
+                code = self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                code = None
             said = self.last_words()
             raise RuntimeError(f"{which}: the worker process on core {self.core} ended"
                                + (f" (exit status {code})" if code is not None else "")
