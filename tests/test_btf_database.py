@@ -213,3 +213,30 @@ def test_the_bar_s_skip_takes_work_found_done_out_of_the_total():
         bar.advance(10)
         (task,) = bar._bar.tasks
         assert (task.total, task.completed) == (70, 10)
+
+
+@pytest.mark.skipif(len(__import__("brdffit.btf.processes").btf.processes.cores()) < 2,
+                    reason="worker processes need a system with two cores a process can be confined to")
+def test_one_set_of_worker_processes_serves_every_material(database, singles, tmp_path, monkeypatch):
+    from brdffit.btf import processes
+
+    processes.close()
+    made = []
+    real = processes._Pool.__init__
+
+    def counted(self, cores):
+        made.append(tuple(cores))
+        real(self, cores)
+
+    monkeypatch.setattr(processes._Pool, "__init__", counted)
+    out = tmp_path / "out"
+    result = brdffit.fit_btf_database(database, "lambert", out=out, tile=4, processes=2, progress=False)
+    assert [r["status"] for r in result.rows] == ["fitted"] * 3
+    assert made == [tuple(processes.cores()[:2])]  # started once (felt), kept for wool; cork's one tile here
+    for name, single in singles.items():
+        back = brdffit.ParameterMaps.load(out / name / "params.exr")
+        np.testing.assert_allclose(back.params["kd"], single.params["kd"], rtol=1e-6)
+        np.testing.assert_allclose(back.loss, single.loss, rtol=1e-6)
+        summary = json.loads((out / name / "summary.json").read_text())
+        assert summary["converged"] == single.converged.sum()
+        assert summary["worker_processes"] == (None if name == "cork" else 2)
