@@ -170,3 +170,28 @@ def test_prune_stops_at_the_limit_and_never_deletes_the_program_just_written(tmp
     monkeypatch.setattr(cache, "PROGRAMS_MAX_BYTES", 300)
     cache._prune(tmp_path, keep=tmp_path / "kept.bin")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.bin", "notes.txt", "y.bin", "z.bin"]
+
+
+def test_a_vector_width_in_xla_flags_rules_and_keys_its_own_programs(tmp_path):
+    """brdffit's 512-bit vectors (cache.compiler_options, where the CPU has AVX-512) give way to a width the
+    user sets in XLA_FLAGS; a program kept under one is not loaded under the other (it is compiled)."""
+    probe = "from brdffit.fitting import cache; import json; print(json.dumps(cache.compiler_options()))"
+
+    def options(flags):
+        env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"} | ({"XLA_FLAGS": flags} if flags else {})
+        run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=300, env=env)
+        assert run.returncode == 0, run.stderr[-2000:]
+        return json.loads(run.stdout.strip().splitlines()[-1])
+
+    avx512 = " avx512f " in f" {Path('/proc/cpuinfo').read_text()} ".replace("\n", " ") \
+        if Path("/proc/cpuinfo").exists() else False
+    assert options(None) == ({"xla_cpu_prefer_vector_width": 512} if avx512 else {})
+    assert options("--xla_cpu_prefer_vector_width=256") == {}
+    first = _fit(tmp_path)
+    env = dict(os.environ, XLA_FLAGS="--xla_cpu_prefer_vector_width=256")
+    run = subprocess.run([sys.executable, "-c", FIT, "100"], capture_output=True, text=True, timeout=600,
+                         env=dict(env, BRDFFIT_CACHE=str(tmp_path)))
+    assert run.returncode == 0, run.stderr[-3000:]
+    other = json.loads(run.stdout.strip().splitlines()[-1])
+    assert other["lowered"], "a program kept under other options was loaded"
+    assert abs(other["loss"] - first["loss"]) <= 1e-12 * first["loss"]
