@@ -42,11 +42,11 @@ from pathlib import Path
 
 from ..errors import InputError, UsageError
 
-#: Texels a run fits at least for ``processes=None`` to start workers: a worker's start (Python, JAX, the
-#: compiled programs from the disk cache) takes about 1.2 s, a 64 x 64
-#: ggx BTF about 5 s on 2 cores. Measured (ggx, programs from the disk cache): two workers start and answer a
-#: first request of 64 texels in 1.37 s, 0.14 s once started.
-AUTO_MIN_TEXELS = 4096
+#: Texels a run fits at least for ``processes=None`` to start workers: their start (Python, JAX, the compiled
+#: programs from the disk cache) takes about 1.4 s, which a 64 x 64 ggx BTF does not repay on 2 cores
+#: (``bench_btf.py --size 64 --one-process``: first run 730 texels/s in workers, 855 in one process; warm
+#: 1,034 against 890); about 8,000 texels do. With more cores the workers gain more (XLA's pool is wider).
+AUTO_MIN_TEXELS = 8192
 
 
 def cores() -> list[int]:
