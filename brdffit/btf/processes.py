@@ -11,8 +11,10 @@ and the tiles are shared out among the workers as a Dask cluster's are: one requ
 tiles, to whichever worker is free; the arrays come back, and the run writes the tile files as
 a run in one process does (resuming, the maps, the summary are the same code).
 
-The maps equal a run in one process: a texel's fit is the same compiled code on the same data
-(``lanes``: one lane at a time on a CPU, so neither the group nor the worker changes a bit of it).
+The maps equal a run in one process to rounding, not to the bit: a texel's fit is the same code on the
+same data (``lanes``: one lane at a time on a CPU, so the group does not change it), but XLA may split a
+sum over its thread pool, and a worker's pool is one thread wide (seen: 4e-16 relative, the same steps;
+``tests/test_btf_processes.py``). Runs in workers equal each other to the bit.
 
 A worker is ``python -c`` importing :func:`serve`: a helper process of this run
 (``_files.start_process``: a session of its own, so a terminal's Ctrl-C reaches only brdffit, which
