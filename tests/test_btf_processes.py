@@ -75,8 +75,12 @@ def test_two_threads_runs_at_once_share_the_workers_in_turn(ggx_btf, one_process
 
     with ThreadPoolExecutor(2) as pool:
         runs = [pool.submit(brdffit.fit_btf, ggx_btf, "ggx", progress=False, processes=2) for _ in range(2)]
-        for run in runs:
-            _assert_same_maps(run.result(timeout=300), one_process)
+        maps = [run.result(timeout=300) for run in runs]
+    for m in maps:
+        _assert_same_maps(m, one_process)
+    for k in maps[0].params:  # runs in workers equal each other to the bit
+        np.testing.assert_array_equal(maps[0].params[k], maps[1].params[k])
+    np.testing.assert_array_equal(maps[0].loss, maps[1].loss)
 
 
 def test_a_run_in_workers_resumes_from_its_tile_files(ggx_btf, one_process, tmp_path):
