@@ -120,6 +120,18 @@ def test_an_input_error_in_a_worker_is_the_run_s_input_error(tmp_path):
     assert errors[0] == errors[1] == f"{btf.cache}: truncated cache file (tile 3)"
 
 
+def test_the_default_starts_no_more_workers_than_memory_has_room_for(monkeypatch):
+    many = 10**6  # texels and tiles enough for a worker per core
+    monkeypatch.setattr(processes, "available_memory", lambda: None)
+    assert processes.count(None, many, many) == len(processes.cores())
+    monkeypatch.setattr(processes, "available_memory", lambda: int(2.5 * processes.WORKER_BYTES))
+    assert processes.count(None, many, many) == 2
+    monkeypatch.setattr(processes, "available_memory", lambda: int(1.5 * processes.WORKER_BYTES))
+    assert processes.count(None, many, many) == 1  # room for one: the run's own process fits
+    assert processes.count(2, many, many) == 2  # asked for: as asked
+    assert processes.count(None, many, processes.AUTO_MIN_TEXELS - 1) == 1
+
+
 def test_processes_is_checked(ggx_btf):
     for bad in (0, -1, 1.5, True):
         with pytest.raises(brdffit.UsageError, match="processes must be a whole number"):
