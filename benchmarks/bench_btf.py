@@ -44,10 +44,9 @@ def cpu_seconds() -> float:
     from brdffit.btf import processes
 
     total = time.process_time()
-    pool = processes._POOL.get("pool")
-    for w in pool.workers if pool is not None else []:
+    for pid in processes.worker_pids():
         try:
-            fields = Path(f"/proc/{w.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
             total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
         except (OSError, ValueError, IndexError):
             pass

@@ -39,11 +39,6 @@ def one_process(ggx_btf):
     return brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=1)
 
 
-def _workers() -> list[int]:
-    pool = processes._POOL.get("pool")
-    return [] if pool is None else [w.proc.pid for w in pool.workers]
-
-
 def _cpus_allowed(pid: int) -> str:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("Cpus_allowed_list:"):
@@ -65,7 +60,7 @@ def test_workers_confined_to_a_core_each_give_the_maps_of_one_process(ggx_btf, o
     maps = brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=2)
     _assert_same_maps(maps, one_process)
     assert maps.converged.all() and maps.info["worker_processes"] == 2 and one_process.info["worker_processes"] is None
-    pids = _workers()
+    pids = processes.worker_pids()
     assert len(pids) == 2 and os.getpid() not in pids
     assert sorted(_cpus_allowed(p) for p in pids) == [str(c) for c in processes.cores()[:2]]
 
@@ -95,16 +90,16 @@ def test_a_run_in_workers_resumes_from_its_tile_files(ggx_btf, one_process, tmp_
 
 def test_a_dead_worker_is_one_error_and_the_next_run_starts_new_ones(ggx_btf, one_process, tmp_path):
     brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=2)
-    dead = _workers()[0]
+    dead = processes.worker_pids()[0]
     os.kill(dead, signal.SIGKILL)
     out = tmp_path / "run"
     with pytest.raises(RuntimeError, match=r"the worker process on core \d+ ended \(exit status -9\)"):
         brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=2, out=out)
-    assert _workers() == []  # the pool was ended with the run, its other worker too
+    assert processes.worker_pids() == []  # the pool was ended with the run, its other worker too
     assert not (out / "params.exr").exists()
     maps = brdffit.fit_btf(ggx_btf, "ggx", progress=False, processes=2, out=out)  # resumed, new workers
     _assert_same_maps(maps, one_process)
-    assert dead not in _workers()
+    assert dead not in processes.worker_pids()
 
 
 def test_an_input_error_in_a_worker_is_the_run_s_input_error(tmp_path):

@@ -204,25 +204,30 @@ class TileRun:
         return self._finish(seconds, self.texels(todo), workers)
 
     def _fitted(self, todo):
-        """(tile, arrays, who fitted it) for every tile of ``todo``, as they are finished."""
-        job = self.job
+        """(tile, arrays, who fitted it) for every tile of ``todo``, as they are finished; the tile files
+        written (by this process, or by the Dask worker that fitted the tile)."""
         if self.client is not None:
             from .cluster import fit_tiles
 
-            yield from fit_tiles(self.client, self.btf, job, todo, self.tiles_dir)
+            yield from fit_tiles(self.client, self.btf, self.job, todo, self.tiles_dir)
             return
-        if self.processes > 1:  # worker processes of a core each (processes.py); the files written here
+        if self.processes > 1:  # worker processes of a core each (processes.py)
             from .processes import fitted
 
-            for t, arrays, where in fitted(self.btf, job, _tile.group_tiles(self.btf, todo, self.processes),
-                                           self.processes, self.clock):
-                if self.tiles_dir is not None:
-                    _run.save_tile(self.tiles_dir, t, arrays)
-                yield t, arrays, where
-            return
-        # Here: the tiles in groups (``tile.group_tiles``: a batch big enough for the backend's lanes), the
-        # next group read and prepared in a thread while the current one is solved.
-        clock = self.clock
+            found = fitted(self.btf, self.job, _tile.group_tiles(self.btf, todo, self.processes), self.processes,
+                           self.clock)
+        else:
+            found = self._fitted_here(todo)
+        for t, arrays, where in found:
+            if self.tiles_dir is not None:
+                _run.save_tile(self.tiles_dir, t, arrays)
+            yield t, arrays, where
+
+    def _fitted_here(self, todo):
+        """(tile, arrays, "this process") for every tile of ``todo``, fitted in this process: in groups
+        (``tile.group_tiles``: a batch big enough for the backend's lanes), the next group read and prepared
+        in a thread while the current one is solved."""
+        job, clock = self.job, self.clock
 
         def load(group):
             t_read = time.perf_counter()
@@ -240,8 +245,6 @@ class TileRun:
                 fitted = _tile.fit_tiles(self.btf, group, job.model, job.options, job.neighbours, loaded=loaded,
                                          clock=clock)
                 for t, arrays in zip(group, fitted):
-                    if self.tiles_dir is not None:
-                        _run.save_tile(self.tiles_dir, t, arrays)
                     yield t, arrays, "this process"
 
     def _finish(self, seconds: float, n_fitted: int, workers: set[str]) -> ParameterMaps:

@@ -117,7 +117,8 @@ def _fitted(btf, job, groups, workers, clock):
     from .tile import pack_job
 
     pool = _pool(workers)
-    request = (dataclasses.replace(btf, _owner=None), pack_job(job.model, job.options, job.neighbours))
+    shipped = dataclasses.replace(btf, _owner=None)  # the description; the cache file stays this process's
+    packed = pack_job(job.model, job.options, job.neighbours)
     todo: queue.SimpleQueue = queue.SimpleQueue()
     for group in groups:
         todo.put(group)
@@ -130,7 +131,7 @@ def _fitted(btf, job, groups, workers, clock):
                 group = todo.get_nowait()
             except queue.Empty:
                 return
-            answer = worker.ask((request[0], group, request[1]))
+            answer = worker.ask((shipped, group, packed))
             done.put((group, answer, worker))
             if answer is None:
                 return
@@ -274,6 +275,12 @@ def _pool(workers: int) -> _Pool:
         return pool
 
 
+def worker_pids() -> list[int]:
+    """The process ids of the workers running now (none: [])."""
+    pool = _POOL.get("pool")
+    return [] if pool is None else [w.proc.pid for w in pool.workers]
+
+
 def close(kill: bool = False) -> None:
     """End the worker processes (the next run that needs them starts new ones)."""
     pool = _POOL.pop("pool", None)
@@ -315,13 +322,15 @@ def _confine(core: int) -> None:
 
 def _answer(btf, tiles: list[int], packed: bytes):
     import resource
+    import time
 
     from . import tile as _tile
 
     try:
         model, options, neighbours = _tile.unpack_job(packed)
-        clock = {"read": 0.0, "compile": 0.0, "solve": 0.0}
-        loaded = _timed(clock, "read", _tile.load_tiles, btf, tiles, model, options)
+        t_read = time.perf_counter()
+        loaded = _tile.load_tiles(btf, tiles, model, options)
+        clock = {"read": time.perf_counter() - t_read, "compile": 0.0, "solve": 0.0}
         arrays = _tile.fit_tiles(btf, tiles, model, options, neighbours, loaded=loaded, clock=clock)
     except InputError as exc:
         return ("input", exc.path, exc.problem)
@@ -329,12 +338,3 @@ def _answer(btf, tiles: list[int], packed: bytes):
         return ("error", type(exc).__name__, " ".join(str(exc).split())[:500])
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
     return ("ok", {"tiles": arrays, "clock": clock, "peak_rss_mb": peak})
-
-
-def _timed(clock: dict, key: str, fn, *args):
-    import time
-
-    t = time.perf_counter()
-    out = fn(*args)
-    clock[key] += time.perf_counter() - t
-    return out

@@ -157,6 +157,23 @@ def _key_text(key, example) -> str | None:
     return f"{parts}|{shapes}|{jax.tree_util.tree_structure(example)}|jax {jax.__version__}|{_source_hash()}"
 
 
+def _cpu_features() -> str:
+    """The CPU's instruction-set flags (Linux's /proc/cpuinfo), or ``platform.processor()`` elsewhere."""
+    if "features" not in _STATE:
+        import platform
+
+        features = None
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+                features = next((line for line in fh if line.startswith(("flags", "Features"))), None)
+        except OSError:
+            pass
+        if features is None:  # not Linux: platform.processor() (it runs `uname -p`, ~6 ms, on Linux)
+            features = platform.processor()
+        _STATE["features"] = features.strip()
+    return _STATE["features"]
+
+
 def _machine() -> str:
     """What a compiled CPU program depends on besides its source and shapes: jaxlib, the backend,
     and the instruction set it was compiled for (a cache folder shared between machines must not
@@ -167,17 +184,9 @@ def _machine() -> str:
         import jax
         import jaxlib
 
-        features = None
-        try:
-            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-                features = next((line for line in fh if line.startswith(("flags", "Features"))), None)
-        except OSError:
-            pass
-        if features is None:  # not Linux: platform.processor() (it runs `uname -p`, ~6 ms, on Linux)
-            features = platform.processor()
         device = jax.devices()[0]
         _STATE["machine"] = (f"jaxlib {jaxlib.__version__}|{device.platform}|{device.client.platform_version}|"
-                             f"{platform.machine()}|{features.strip()}")
+                             f"{platform.machine()}|{_cpu_features()}")
     return _STATE["machine"]
 
 
@@ -191,7 +200,7 @@ def compiler_options() -> dict:
     if "options" not in _STATE:
         import jax
 
-        wide = (jax.devices()[0].platform == "cpu" and " avx512f " in f" {_machine().rsplit('|', 1)[-1]} "
+        wide = (jax.devices()[0].platform == "cpu" and "avx512f" in _cpu_features().split()
                 and "xla_cpu_prefer_vector_width" not in os.environ.get("XLA_FLAGS", ""))
         _STATE["options"] = {"xla_cpu_prefer_vector_width": 512} if wide else {}
     return dict(_STATE["options"])
