@@ -31,6 +31,7 @@ def main() -> None:
     from brdffit.btf import generate as gen
     from brdffit.fitting import cache, stages
     from brdffit.fitting.driver import solve
+    from brdffit.fitting.objective import objective_of
     from brdffit.fitting.options import FitOptions
     from brdffit.fitting.problem import prepare_values
     from brdffit.grid import ubo_pairs
@@ -48,7 +49,7 @@ def main() -> None:
     fitted = solve(space, o, data, results=False)
     rng = np.random.default_rng(0)
     starts = np.clip(fitted.v * (1 + 0.03 * rng.standard_normal(fitted.v.shape)), space.lo, space.hi)
-    round_stage = jax.jit(stages.round_stage(model, o.loss, "lm", o.rtol, o.atol, o.max_steps, True, 1))
+    round_stage = jax.jit(stages.round_stage(objective_of(model, o.loss), "lm", o.rtol, o.atol, o.max_steps, True, 1))
     call = ((jnp.asarray(starts), None), data, jnp.asarray(space.lo), jnp.asarray(space.hi),
             np.asarray(space.free, bool), np.int32(o.max_steps))
     programs = {"XLA default": round_stage.lower(*call).compile(),

@@ -92,7 +92,7 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     fits = np.arange(int(np.shape(data.ref)[0])) if fits is None else np.asarray(fits)
     n, P = len(fits), model.n_free
     k = options.starts(model)
-    unscale = np.where(space.linear_mask(), unit, 1.0)
+    unscale = np.where(space.linear, unit, 1.0)
     table = Stages(space, options, data, note)
     # The solves, in the solve's unit (a copy of the values when it is not 1: a table far from
     # reflectance's range under a loss a unit only rescales).
@@ -189,7 +189,7 @@ def _unreached(run: Stages, fits: np.ndarray, v: np.ndarray, metrics: dict | Non
     from .space import AT_BOUND_RTOL, _span
 
     space = run.space
-    scales = space.free & space.linear_mask()
+    scales = space.free & space.linear
     if not scales.any():
         scales = space.free
     if not scales.any():

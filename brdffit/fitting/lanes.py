@@ -34,6 +34,7 @@ import jax
 import numpy as np
 
 from .cache import compiled
+from .objective import objective_of
 from .problem import Data
 from .state import Rounds
 
@@ -174,7 +175,12 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
     return result, compile_s, time.perf_counter() - t0
 
 
-def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
+def _key(stage: str, objective, *options) -> tuple:
+    """A compiled stage's key (``cache.compiled``): the stage, the model and loss it evaluates, its options."""
+    return (stage, objective.model, objective.loss, *options)
+
+
+def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
                  data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None, note=None) -> Rounds:
     """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
     at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
@@ -197,9 +203,9 @@ def solve_rounds(model, loss: str, solver: str, rtol: float, atol: float, max_st
         # one compiled solve serves every round.
         rounds = resumable and p.lanes > 1 and len(active) > ROUND_MIN_LANES
         steps = min(ROUND_STEPS, max_steps - taken) if rounds else max_steps - taken
-        build_args = (model, loss, solver, rtol, atol, max_steps, first, p.lanes)
+        build_args = (objective, solver, rtol, atol, max_steps, first, p.lanes)
         lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
-        res, c_s, r_s = run_stage(("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
+        res, c_s, r_s = run_stage(_key("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
                                   fits[active], (*bounds, np.int32(steps)), p, note=note)
         compile_s, run_s = compile_s + c_s, run_s + r_s
         v_new, resume, done, code, took = res
@@ -231,9 +237,10 @@ class Stages:
     def __init__(self, space, options, data: Data, note, seconds: dict | None = None):
         self.space, self.options, self.data, self.note = space, options, data, note
         self.model = space.model
+        self.objective = objective_of(self.model, options.loss)
         self.plan = plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
-        self.anchor = space.clip(self.model.default_vector())
+        self.anchor = space.anchor
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
     def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
@@ -259,8 +266,8 @@ class Stages:
         k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
         if subset is None:
             subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
-        key = (self.model, o.loss, k, True, self.plan.lanes)
-        out, c_s, r_s = run_stage(("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
+        key = (self.objective, k, True, self.plan.lanes)
+        out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)
         self._count(c_s, r_s, init=True)
         return out[0]
@@ -270,10 +277,10 @@ class Stages:
         if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
             from .solver_scipy import solve_lanes
 
-            r = solve_lanes(self.model, o.loss, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
+            r = solve_lanes(self.objective, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
                             max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
         else:
-            r = solve_rounds(self.model, o.loss, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+            r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
                              self.bounds, self.plan, progress=progress, note=self.note)
         self._count(r.compile_s, r.run_s)
         return r
@@ -281,8 +288,8 @@ class Stages:
     def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
         from .stages import finish_stage
 
-        key = (self.model, self.options.loss, metrics, jtj, self.plan.lanes)
-        out, c_s, r_s = run_stage(("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
+        key = (self.objective, metrics, jtj, self.plan.lanes)
+        out, c_s, r_s = run_stage(_key("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
                                   note=self.note)
         self._count(c_s, r_s)
         return out

@@ -34,6 +34,7 @@ The loss enters through g'(f) (every loss is elementwise in f): J = diag(dr/df) 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import functools
@@ -385,6 +386,30 @@ def model_values(model: Model):
     return values
 
 
+class Objective(NamedTuple):
+    """One model under one loss, as the stages and solvers of a fit evaluate it: built once per (model, loss)
+    (:func:`objective_of`) and handed to them whole. They need these functions; the model itself only names
+    their compiled programs (``model``, ``loss``) and lays out the grid of starts."""
+
+    model: Model
+    loss: str
+    residual: Callable  # (v, data) -> r (M,), the loss's residuals at a flat vector (:func:`flat_residual`)
+    normal_equations: Callable  # (v, data, g_ref=None, geometry=None) -> (r.r, J^T r, J^T J)
+    values: Callable  # (v, data, geometry=None) -> f (N, C), by the step's route (:func:`model_values`)
+    loss_at: Callable  # (v, data, consts) -> the fit's loss (:func:`model_loss`)
+    constants: Callable  # (data, geometry=None) -> FitConstants (:func:`fit_constants`)
+    geometry: Callable  # (data) -> the direction-only terms, or None (:func:`precompute_geometry`)
+
+
+@functools.lru_cache(maxsize=None)
+def objective_of(model: Model, loss: str) -> Objective:
+    """The :class:`Objective` of ``model`` under ``loss`` (one per process: the stages' compiled programs
+    are kept per objective)."""
+    return Objective(model, loss, flat_residual(model, loss), normal_equations(model, loss), model_values(model),
+                     model_loss(model, loss), functools.partial(fit_constants, model, loss),
+                     functools.partial(precompute_geometry, model))
+
+
 def dense_normal_equations(model: Model, loss: str):
     """The reference: jacfwd over all P entries (what the structured forms must equal)."""
     residual = flat_residual(model, loss)
@@ -396,11 +421,6 @@ def dense_normal_equations(model: Model, loss: str):
     return fn
 
 
-def gauss_newton_matrix(model: Model, loss: str):
-    """(v, data) -> J^T J alone (the standard errors' need)."""
-    ne = normal_equations(model, loss)
-    return lambda v, data: ne(v, data)[2]
-
-
-__all__ = ["normal_equations", "model_values", "dense_normal_equations", "gauss_newton_matrix", "compression", "separable"]
+__all__ = ["Objective", "objective_of", "normal_equations", "model_values", "dense_normal_equations", "compression",
+           "separable"]
 

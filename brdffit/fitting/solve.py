@@ -12,8 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ..models.base import Model
-from .objective import model_loss
+from .objective import Objective
 from .solver_lm import BoundedLevenbergMarquardt, solve_lm
 from .solver_optx import solve_stock, stock_solver
 
@@ -25,12 +24,12 @@ def make_solver(name: str, rtol: float, atol: float, normal_equations: Callable 
     return stock_solver(name, rtol, atol)
 
 
-def solve_one(model: Model, loss: str, solver_name: str, rtol: float, atol: float, max_steps: int):
+def solve_one(objective: Objective, solver_name: str, rtol: float, atol: float, max_steps: int):
     """The jit-able solve of one start, at most ``max_steps`` steps. ``lm``: run(v0 (P,), data, lo, hi,
     free, consts, resume=None) -> (v, Resume, done, code, steps) (``solver_lm.solve_lm``: it continues
     from a previous round's ``resume``); a stock solver: run(v0, data, lo, hi, free, consts) -> the same,
     its ``Resume`` holding the loss at v (``c``), at v0 (``c0``) and J^T J at v (``H``). ``consts``:
     ``objective.fit_constants`` of the data. The caller checks the result (:func:`result_check`)."""
     if solver_name == "lm":
-        return solve_lm(model, loss, rtol, atol, max_steps)
-    return solve_stock(model, loss, solver_name, rtol, atol, max_steps, model_loss(model, loss))
+        return solve_lm(objective, rtol, atol, max_steps)
+    return solve_stock(objective, solver_name, rtol, atol, max_steps)

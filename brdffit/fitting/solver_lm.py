@@ -21,9 +21,8 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ..models.base import Model
 from .linalg import inverse_quadratic_form, spd_solve
-from .objective import flat_residual
+from .objective import Objective
 from .state import Resume
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
@@ -195,17 +194,14 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return y, aux, {"resume": Resume(state.c, state.c0, state.g, state.H, state.lam, state.nu), "done": state.done}
 
 
-def solve_lm(model: Model, loss: str, rtol: float, atol: float, max_steps: int):
+def solve_lm(objective: Objective, rtol: float, atol: float, max_steps: int):
     """run(v0 (P,), data, lo, hi, free, consts, resume=None, steps=None) -> (v, Resume, done, code, steps) with
     :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most ``max_steps``
     steps (or ``steps``, a run-time budget below it) from v0, or from a previous round's ``resume`` (then v0
     is that round's v).
     ``Resume.c`` is the loss at v, ``Resume.H`` J^T J there, ``Resume.c0`` the loss at the first start;
     ``done``: the solver's own test passed."""
-    from .objective import normal_equations
-
-    fn = flat_residual(model, loss)
-    ne = normal_equations(model, loss)
+    fn, ne = objective.residual, objective.normal_equations
     # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
     solver = BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=lambda y, a: ne(y, *a))
 

@@ -13,8 +13,8 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ..models.base import Model, _fold
-from .objective import flat_residual
+from ..models.base import _fold
+from .objective import Objective
 from .solver_lm import status_code
 
 
@@ -66,16 +66,14 @@ def stock_solver(name: str, rtol: float, atol: float):
 COLUMN_NORM = 30.0
 
 
-def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, max_steps: int, loss_of):
+def solve_stock(objective: Objective, name: str, rtol: float, atol: float, max_steps: int):
     """run(v0 (P,), data, lo, hi, free, consts) -> (v, Resume, done, code, steps) with the stock solver
     ``name`` (``Resume``: the loss at v and at v0, J^T J at v; the damping entries 0: a stock solve does
-    not continue); ``loss_of(v, data, consts)``: the fit's loss (``solve.model_loss``)."""
+    not continue)."""
     from .state import Resume
-    from .objective import gauss_newton_matrix
 
-    fn = flat_residual(model, loss)
+    fn, ne, loss_of = objective.residual, objective.normal_equations, objective.loss_at
     solver = stock_solver(name, rtol, atol)
-    jtj = gauss_newton_matrix(model, loss)
 
     def run(v0, data, lo, hi, free, consts):
         """The stock solver works on z = x * s, x = from_box(v), s = |J_j(x0)| / COLUMN_NORM.
@@ -112,7 +110,7 @@ def solve_stock(model: Model, loss: str, name: str, rtol: float, atol: float, ma
         v = to_box(jnp.where(free, sol.value / scale, x0), lo, hi)
         code = status_code(sol.result)
         zero = jnp.zeros((), v.dtype)
-        state = Resume(loss_of(v, data, consts), loss_of(v0, data, consts), jnp.zeros_like(v), jtj(v, data), zero, zero)
+        state = Resume(loss_of(v, data, consts), loss_of(v0, data, consts), jnp.zeros_like(v), ne(v, data)[2], zero, zero)
         return v, state, code == 0, code, sol.stats["num_steps"]
 
     return run

@@ -12,12 +12,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .cache import compiled
-from .objective import flat_residual
+from .objective import Objective
 from .problem import Data
 from .state import Rounds
 
 
-def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):
+def solve_scipy(objective: Objective, v0, data, lo, hi, free, *, rtol, atol, max_steps, jac: str):
     """scipy.optimize.least_squares (TRF, bounded) on the free parameters of the flat vector.
 
     ``jac="exact"`` uses the JAX Jacobian (jit-compiled); "2-point"/"3-point" scipy's finite
@@ -26,10 +26,10 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
     """
     from scipy.optimize import least_squares
 
-    fn = flat_residual(model, loss)
+    fn = objective.residual
     example = (jnp.asarray(v0, dtype=jnp.float64), data)
-    res, c1 = compiled(("scipy_res", model, loss), lambda: fn, *example)
-    jacf, c2 = compiled(("scipy_jac", model, loss), lambda: jax.jacfwd(fn), *example)
+    res, c1 = compiled(("scipy_res", objective.model, objective.loss), lambda: fn, *example)
+    jacf, c2 = compiled(("scipy_jac", objective.model, objective.loss), lambda: jax.jacfwd(fn), *example)
     lo, hi, free = np.asarray(lo, float), np.asarray(hi, float), np.asarray(free, bool)
     v_full = np.clip(np.asarray(v0, dtype=np.float64), lo, hi)
 
@@ -68,7 +68,7 @@ def solve_scipy(model, loss, v0, data, lo, hi, free, *, rtol, atol, max_steps, j
     return v, value, code, int(sol.nfev), start_value, c1 + c2, run_s
 
 
-def solve_lanes(model, loss: str, v0: np.ndarray, data: Data, fits: np.ndarray, bounds: tuple, *, rtol: float,
+def solve_lanes(objective: Objective, v0: np.ndarray, data: Data, fits: np.ndarray, bounds: tuple, *, rtol: float,
                 atol: float, max_steps: int, jac: str, progress=None) -> Rounds:
     """:func:`solve_scipy` from each start ``v0`` (L, P) on row ``fits[i]`` of the per-fit fields, one after
     another: the lanes of ``lanes.solve_rounds``, with no J^T J (NaN: the driver's finish computes it)."""
@@ -79,7 +79,7 @@ def solve_lanes(model, loss: str, v0: np.ndarray, data: Data, fits: np.ndarray, 
     rows = []
     for start, row in zip(v0, fits):
         one = Data(*(np.asarray(a)[row] if m else np.asarray(a) for a, m in zip(data, lane)))
-        rows.append(solve_scipy(model, loss, start, one, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps,
+        rows.append(solve_scipy(objective, start, one, lo, hi, free, rtol=rtol, atol=atol, max_steps=max_steps,
                                 jac=jac))
         if progress is not None:
             progress(1 / len(fits))

@@ -76,6 +76,11 @@ class ParameterSpace:
     physical: bool = False
     #: Names given in ``bounds=`` (for messages).
     overridden: frozenset[str] = frozenset()
+    #: The flat layout read from the model once, when the space is built: its default values (clipped
+    #: into the box: the start "defaults", and the value of a held parameter a solve must not move) and
+    #: the entries of its linear parameters (those a table's unit scales).
+    anchor: np.ndarray | None = None
+    linear: np.ndarray | None = None
 
     # -- construction -----------------------------------------------------------------------------
     @classmethod
@@ -122,8 +127,10 @@ class ParameterSpace:
                 raise UsageError(f"fixed value for {name!r}: {value!r} outside its bounds [{a[0]:g}, {b[0]:g}]")
             lo[s] = hi[s] = values[s] = v
             free[s] = False
-        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds))
-        return dataclasses.replace(space, order=space._interchangeable_groups())
+        linear = np.concatenate([np.full(model.size(p), p.linear) for p in model.params])
+        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds), None, linear)
+        return dataclasses.replace(space, order=space._interchangeable_groups(),
+                                   anchor=space.clip(model.default_vector()))
 
     def _interchangeable_groups(self) -> tuple[tuple[Lobe, ...], ...]:
         slices = dict(self.model.slices())
@@ -153,17 +160,14 @@ class ParameterSpace:
     def n_free(self) -> int:
         return int(self.free.sum())
 
-    def linear_mask(self) -> np.ndarray:
-        """Flat entries of the linear parameters (those a table's unit scales)."""
-        return np.concatenate([np.full(self.model.size(p), p.linear) for p in self.model.params])
-
     def in_unit(self, unit: float) -> "ParameterSpace":
         """This space for the table divided by ``unit`` (``problem.data_unit``): the linear parameters'
         bounds and fixed values divided by it, the rest unchanged."""
         if unit == 1.0:
             return self
-        scale = np.where(self.linear_mask(), 1.0 / unit, 1.0)
-        return dataclasses.replace(self, lo=self.lo * scale, hi=self.hi * scale, values=self.values * scale)
+        scale = np.where(self.linear, 1.0 / unit, 1.0)
+        scaled = dataclasses.replace(self, lo=self.lo * scale, hi=self.hi * scale, values=self.values * scale)
+        return dataclasses.replace(scaled, anchor=scaled.clip(self.anchor))
 
     def start(self, init) -> np.ndarray:
         """A flat start in this space from "defaults", a params dict (missing parameters take their
@@ -172,7 +176,7 @@ class ParameterSpace:
         if isinstance(init, str):
             if init != "defaults":
                 raise UsageError(f"init must be None, 'defaults', a params dict or a FitResult, not {init!r}")
-            return self.clip(model.default_vector())
+            return self.anchor.copy()
         if isinstance(init, Mapping):
             try:
                 return self.clip(model.flatten({**model.defaults(), **init}))

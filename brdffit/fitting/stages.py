@@ -31,9 +31,8 @@ import jax.numpy as jnp
 
 from .._fit_defaults import SOLVERS
 from ..errors import UsageError
-from ..models.base import Model
 from . import init as _init
-from .objective import flat_residual, values_metrics
+from .objective import Objective, values_metrics
 from .problem import Data
 
 
@@ -79,15 +78,13 @@ def map_lanes(fn, lane_args, data: Data, lanes: int):
     return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
 
 
-def shared_geometry(model: Model, data: Data):
+def shared_geometry(objective: Objective, data: Data):
     """The direction-only terms of a separable model (``objective.precompute_geometry``) when every lane
     shares its directions (a BTF's texels): computed once per call, outside the lanes' loop; else None."""
-    from .objective import precompute_geometry
-
     lane = per_lane(data)
     if lane.wi or lane.wo:
         return None
-    return precompute_geometry(model, _solve_dtype(data))
+    return objective.geometry(_solve_dtype(data))
 
 
 def _solve_dtype(data: Data) -> Data:
@@ -98,14 +95,14 @@ def _solve_dtype(data: Data) -> Data:
 
 # -- stages -----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
-def start_stage(model: Model, loss: str, k: int, grid: bool, lanes: int):
+def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
     """run(lane, data, grid_points (G, m), lo, hi, free, anchor, subset (S,) int) -> (starts (L, k, P), values
     (L, k)): per lane the k candidates with the lowest loss on the ``subset`` rows, among the grid points
     (``init.vp_grid``: the linear parameters solved at each) when ``grid``, and the E given starts. ``lane``:
     the given starts (L, E, P), or (grids (L, G, m), given) for a grid of each lane's own (then
     ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
-    vp = _init.vp_grid(model, loss)
-    residual = flat_residual(model, loss)
+    vp = _init.vp_grid(objective.model, objective.loss)
+    residual = objective.residual
 
     def one(grid_points, given, data, lo, hi, free, anchor, subset):
         sub = _init.take_rows(_solve_dtype(data), subset)
@@ -134,46 +131,41 @@ def start_stage(model: Model, loss: str, k: int, grid: bool, lanes: int):
 
 
 @functools.lru_cache(maxsize=None)
-def round_stage(model: Model, loss: str, solver: str, rtol: float, atol: float, max_steps: int, first: bool,
-                lanes: int):
+def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max_steps: int, first: bool, lanes: int):
     """run((v (L, P), resume), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)):
     at most ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v
     (``resume`` is None); else from the previous round's ``resume`` (``state.Resume``, one row per
     lane). A stock solver (not resumable) runs ``max_steps`` in its one round; its ``resume`` holds the loss
     at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
-    from .objective import fit_constants
     from .solve import solve_one  # optimistix: imported only when a program is traced
 
-    solve = solve_one(model, loss, solver, rtol, atol, max_steps)
+    solve = solve_one(objective, solver, rtol, atol, max_steps)
 
     def one(v, resume, data, lo, hi, free, steps, geometry):
         data = _solve_dtype(data)
-        consts = fit_constants(model, loss, data, geometry)
+        consts = objective.constants(data, geometry)
         if solver in RESUMABLE:
             return solve(v, data, lo, hi, free, consts, resume, steps)
         return solve(v, data, lo, hi, free, consts)
 
     def run(lane, data, lo, hi, free, steps):
-        geometry = shared_geometry(model, data)
+        geometry = shared_geometry(objective, data)
         return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, steps, geometry), lane, data, lanes)
 
     return run
 
 
 @functools.lru_cache(maxsize=None)
-def finish_stage(model: Model, loss: str, metrics: bool, jtj: bool, lanes: int):
+def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
     """run(v (L, P), data) -> dict: ``loss`` (L,) at v afresh, ``floor`` (L,) the loss of an exact fit
     (``solve.fit_constants``); with ``metrics`` every metric (dict of (L,)), with ``jtj`` J^T J (L, P, P)
     (the standard errors' need)."""
-    from .objective import fit_constants, model_values, normal_equations
-
-    model_at = model_values(model)
-    ne = normal_equations(model, loss)
+    loss, ne = objective.loss, objective.normal_equations
 
     def one(v, data, geometry):
         data = _solve_dtype(data)
-        consts = fit_constants(model, loss, data, geometry)
-        values = values_metrics(model_at(v, data, consts.geometry), data, (loss,))
+        consts = objective.constants(data, geometry)
+        values = values_metrics(objective.values(v, data, consts.geometry), data, (loss,))
         out = {"loss": values[loss], "floor": consts.loss_floor}
         if metrics:
             out["metrics"] = values
@@ -182,7 +174,7 @@ def finish_stage(model: Model, loss: str, metrics: bool, jtj: bool, lanes: int):
         return out
 
     def run(v, data):
-        geometry = shared_geometry(model, data)
+        geometry = shared_geometry(objective, data)
         return map_lanes(lambda x, d: one(x, d, geometry), v, data, lanes)
 
     return run
