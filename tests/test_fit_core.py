@@ -272,6 +272,19 @@ def test_fit_batch_matches_single_fits():
         np.testing.assert_allclose(r.params["alpha"], a, rtol=0.02)
 
 
+def test_a_fit_does_not_depend_on_the_size_of_the_program_it_ran_in():
+    """On a CPU the lanes run one at a time, in compiled programs of a few sizes (docs/fitting.md#lanes): a
+    fit's numbers must not depend on which size it ran in, so that a BTF's maps do not depend on how its
+    tiles were grouped. ``chunk=1``: every fit in a program of one lane; ``chunk=4``: the three in one of four."""
+    ms = [_measurement({**TRUE, "alpha": [a]}, noise=0.01, seed=3) for a in (0.12, 0.3, 0.45)]
+    one, four = fit_batch(ms, "ggx", chunk=1), fit_batch(ms, "ggx", chunk=4)
+    for a, b in zip(one, four):
+        assert a.converged and b.converged and a.steps == b.steps
+        assert a.loss_value == b.loss_value
+        for k in a.params:
+            np.testing.assert_array_equal(a.params[k], b.params[k], err_msg=k)
+
+
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     """seconds: compile and run of the grid start and of the finish plus those of each scipy solve (time
     shifted by known amounts here, so that the sums cannot hold by chance of zero compile times)."""

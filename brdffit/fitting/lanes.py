@@ -9,9 +9,9 @@ per fit: per chunk only.
 How a backend is used (:func:`plan`, unless the caller sets ``chunk`` and ``lanes``):
 
 - CPU: chunks of ``CPU_CHUNK`` lanes, ``CPU_LANES`` of them vectorised at a time inside the compiled
-  call (a vectorised solve gains little on a CPU beyond sharing each operation's overhead, and its
-  arrays must stay in the cache), as many chunks at once as the machine has cores (XLA runs a call
-  without the GIL).
+  call (one: a loop over the unbatched solve, ``stages.map_lanes``; a vectorised solve gains little on a
+  CPU beyond sharing each operation's overhead, and its arrays must stay in the cache), as many chunks
+  at once as the machine has cores (XLA runs a call without the GIL).
 - GPU (and other accelerators): one call holds up to ``DEVICE_CHUNK`` lanes, all vectorised; the
   lane axis is split over the process's devices.
 
