@@ -12,13 +12,14 @@ stages, i.e. the device's share; the rest, Python on the host; with worker proce
 summed over them); the process's peak resident memory (and the workers');
 with ``--device`` the accelerator's peak memory. ``--one-process`` also runs ``fit_btf(..., processes=1)`` and
 prints the ratio to it. ``--compare`` also runs ``fit_btf(..., neighbours=False)``
-(every texel from the initialisation grid).
+(every texel from the initialisation grid). ``--cold`` keeps compiled programs in a new, empty folder
+(``BRDFFIT_CACHE``), so that the first run compiles every program it needs, as on a new machine.
 
 The BTF is written straight into the tile cache (``btf.generate.model_btf``: no 6561 images to write
 and decode); ``--images`` writes the image folder and reads it with ``load_btf`` instead.
 
     python benchmarks/bench_btf.py [--size 64] [--loop 64] [--model ggx] [--tile 16] [--compare]
-                                   [--device] [--images] [--processes N] [--one-process]
+                                   [--device] [--images] [--processes N] [--one-process] [--cold]
 """
 
 from __future__ import annotations
@@ -79,7 +80,12 @@ def main() -> None:
                     help="fit_btf's processes (default: its own choice; 1: this process alone)")
     ap.add_argument("--one-process", action="store_true",
                     help="also run fit_btf with processes=1 (first and warm) and print the ratio to it")
+    ap.add_argument("--cold", action="store_true",
+                    help="compiled programs kept in a new, empty folder: the first run compiles them all")
     args = ap.parse_args()
+    if args.cold:  # before brdffit is imported: its cache folder is read once (worker processes inherit it)
+        os.environ["BRDFFIT_CACHE"] = tempfile.mkdtemp(prefix="bench-btf-cache-")
+        print(f"compiled programs kept in {os.environ['BRDFFIT_CACHE']} (empty at the start)")
 
     import jax
 
