@@ -136,7 +136,7 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
         ok, code = result_check(out["loss"], start_loss, v, code, out["floor"])
         if not ok.all():  # a point worse than its start (or not finite) gives way to the start
             bad = np.flatnonzero(~ok)
-            v[bad] = np.where(space.free, np.clip(start[bad], space.lo, space.hi), run.anchor)
+            v[bad] = np.where(space.free, np.clip(start[bad], space.lo, space.hi), space.anchor)
             again = run.finish(v[bad], fits[bad], metrics=report_here, jtj=True)
             jtj[bad] = again.pop("jtj")
             for key, value in again.items():

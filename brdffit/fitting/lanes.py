@@ -240,7 +240,6 @@ class Stages:
         self.objective = objective_of(self.model, options.loss)
         self.plan = plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
-        self.anchor = space.anchor
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
     def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
@@ -259,7 +258,7 @@ class Stages:
         o = self.options
         lo, hi, free = self.bounds
         if grids is None:
-            points = cached_grid(self.model, lo, hi, free, self.anchor)
+            points = cached_grid(self.model, lo, hi, free, self.space.anchor)
             lane_args = given
         else:
             points, lane_args = np.zeros((0, 0)), (grids, given)
@@ -268,7 +267,7 @@ class Stages:
             subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
         key = (self.objective, k, True, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
-                                  (points, lo, hi, free, self.anchor, subset), self.plan, note=self.note)
+                                  (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
         self._count(c_s, r_s, init=True)
         return out[0]
 
