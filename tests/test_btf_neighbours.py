@@ -16,15 +16,19 @@ def test_passes_of_a_4x4_tile_by_hand():
     passes = btf_tile.neighbour_passes(4, 4, strides=(4, 2, 1))
     assert len(passes) == 3
     (t1, s1), (t2, s2), (t3, s3) = passes
+    def nearest(sources):  # the rows' sources without the -1 padding
+        return [[int(x) for x in row if x >= 0] for row in sources]
+
     # pass 1: the stride-4 lattice is texel (0, 0) alone, started by the grid
-    assert t1.tolist() == [0] and s1.tolist() == [-1]
+    assert t1.tolist() == [0] and nearest(s1) == [[]]
     # pass 2: the rest of the stride-2 lattice, (0,2) (2,0) (2,2), all nearest to (0,0)
-    assert t2.tolist() == [2, 8, 10] and s2.tolist() == [0, 0, 0]
-    # pass 3: every other texel from its nearest of (0,0) (0,2) (2,0) (2,2); ties to the first
-    # in row-major order: (0,1) is 1 from (0,0) and (0,2) -> (0,0); (1,3) is sqrt 2 from (0,2)
-    # and (2,2) -> (0,2); (3,3) -> (2,2); (3,0) -> (2,0); (1,1) is sqrt 2 from all four -> (0,0)
-    want = {1: 0, 3: 2, 4: 0, 5: 0, 6: 2, 7: 2, 9: 8, 11: 10, 12: 8, 13: 8, 14: 10, 15: 10}
-    assert t3.tolist() == sorted(want) and s3.tolist() == [want[t] for t in sorted(want)]
+    assert t2.tolist() == [2, 8, 10] and nearest(s2) == [[0], [0], [0]]
+    # pass 3: every other texel from all its nearest of (0,0) (0,2) (2,0) (2,2), in row-major order:
+    # (0,1) is 1 from (0,0) and (0,2); (1,3) is sqrt 2 from (0,2) and (2,2); (3,3) 1.4 from (2,2) alone;
+    # (3,0) 1 from (2,0); (1,1) is sqrt 2 from all four
+    want = {1: [0, 2], 3: [2], 4: [0, 8], 5: [0, 2, 8, 10], 6: [2, 10], 7: [2, 10], 9: [8, 10], 11: [10],
+            12: [8], 13: [8, 10], 14: [10], 15: [10]}
+    assert t3.tolist() == sorted(want) and nearest(s3) == [want[t] for t in sorted(want)]
 
 
 @pytest.mark.parametrize("shape", [(16, 16), (5, 7), (1, 3), (1, 1)])
@@ -36,14 +40,32 @@ def test_passes_cover_every_texel_once_from_earlier_passes(shape):
     assert (passes[0][1] == -1).all()
     done = set(passes[0][0].tolist())
     for texels, sources in passes[1:]:
-        assert set(sources.tolist()) <= done
-        # a neighbour, not any fitted texel: within the previous lattice's cell (stride 4 -> 2 * sqrt 2)
+        own = sources >= 0
+        assert own[:, 0].all() and set(sources[own].tolist()) <= done  # at least one, each fitted before
+        # neighbours, not any fitted texels: within the previous lattice's cell (stride 4 -> 2 * sqrt 2), all
+        # at one distance, the nearest of the fitted texels
         r, c = np.divmod(texels, w)
         rs, cs = np.divmod(sources, w)
-        assert np.sqrt((r - rs) ** 2 + (c - cs) ** 2).max() <= 2 * np.sqrt(2) + 1e-12
+        d = np.where(own, np.sqrt((r[:, None] - rs) ** 2 + (c[:, None] - cs) ** 2), np.nan)
+        assert np.nanmax(d) <= 2 * np.sqrt(2) + 1e-12
+        assert np.allclose(np.nanmin(d, axis=1), np.nanmax(d, axis=1))
+        fr, fc = np.divmod(np.asarray(sorted(done)), w)
+        assert np.allclose(np.nanmin(d, axis=1), np.sqrt((r[:, None] - fr) ** 2 + (c[:, None] - fc) ** 2).min(axis=1))
         done |= set(texels.tolist())
     if h * w >= 16:  # most texels start from a neighbour
         assert len(passes[0][0]) <= h * w / 8
+
+
+def test_a_texel_starts_from_its_neighbours_mean_only_where_they_agree():
+    """Neighbours that agree (each parameter within AGREE of the mean's magnitude) start a texel from their
+    mean; across an edge between two materials the mean would lie between two basins: the first starts it."""
+    flat = np.array([[1.0, 0.10], [1.2, 0.12], [1.0, 0.10], [9.0, 0.50], [1.1, 0.30]])
+    sources = np.array([[0, 1, -1, -1],  # agree: mean (1.1, 0.11)
+                        [2, 3, -1, -1],  # an edge: (1, 0.1) and (9, 0.5) -> the first
+                        [4, -1, -1, -1],  # one neighbour: itself
+                        [0, 4, -1, -1]])  # first parameter agrees, second not (0.1 against 0.3) -> the first
+    starts = btf_tile.mean_start(flat, sources)
+    np.testing.assert_allclose(starts, [[1.1, 0.11], [1.0, 0.10], [1.1, 0.30], [1.0, 0.10]], rtol=1e-15)
 
 
 @pytest.fixture(scope="module")
@@ -67,11 +89,18 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     with_nb = brdffit.fit_btf(btf, "ggx", progress=False)
     passes = btf_tile.neighbour_passes(6, 6)
     assert [c[0] is None for c in calls] == [True, False, False]  # the grid for the first pass only
-    # every later texel started from the result of its nearest earlier-fitted texel
+    # every later texel started from the mean of the results of its nearest earlier-fitted texels where they
+    # agree, else from the first of them
     fitted = {}
     for (texels, sources), (starts, v) in zip(passes, calls):
         if starts is not None:
-            np.testing.assert_array_equal(starts, np.stack([fitted[int(s)] for s in sources]))
+            want = []
+            for row in sources:
+                near = np.stack([fitted[int(s)] for s in row if s >= 0])
+                mean = near.mean(axis=0)
+                agree = (np.abs(near - mean) <= btf_tile.AGREE * np.abs(mean)).all()
+                want.append(mean if agree else near[0])
+            np.testing.assert_allclose(starts, np.stack(want), rtol=1e-15, atol=0)
         fitted.update(zip(texels.tolist(), v))
     flat = np.concatenate([with_nb.params[p.name].reshape(36, -1) for p in btf_fit.resolve_model("ggx", 3).params], 1)
     np.testing.assert_array_equal(flat, np.stack([fitted[i] for i in range(36)]))  # the maps hold those results

@@ -108,7 +108,7 @@ def fit_btf(
     ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
     the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
     ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
-    splitting work by hand). ``neighbours``: start most texels from a fitted neighbour's result
+    splitting work by hand). ``neighbours``: start most texels from their fitted neighbours' results
     (see :mod:`brdffit.btf.tile`); False starts every texel from the initialisation grid.
     ``client``: a ``dask.distributed.Client``; its cluster's workers fit the tiles (see
     :mod:`brdffit.btf.cluster`: ``out`` must then be on a file system the workers share).
