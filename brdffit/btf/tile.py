@@ -11,13 +11,13 @@ value than any one of them: a 64 x 64 ggx BTF's texels took 1.96 instead of 2.49
 average, 837 instead of 685-721 texels/s on one core (``benchmarks/README.md``).
 
 Neighbour starts against the grid, measured when they were built (CPU time, which a shared machine
-disturbs less than wall time; losses equal to the grid-started fits within 1e-7 relative): the compiled program of a 64 x 64 ggx BTF's texel
-takes 6.9 ms from the grid and 3.78 steps, 5.1 ms and 3.07 steps from its left neighbour's
-result; ``benchmarks/bench_btf.py --compare`` (64 x 64 ggx): 3.36 instead of 4.26 steps per
-texel, 7.7 instead of 8.5 ms of CPU per texel for the whole fit_btf. A 16 x 16 mosaic of the 4
-RGL materials: 7.75 -> 1.42 steps (a region's texels hold one table: the neighbour's result is
-the answer); a 16 x 16 ggx BTF with maps that change fast from texel to texel: 4.27 -> 4.30
-(only the grid is saved).
+disturbs less than wall time; losses equal to the grid-started fits within 1e-7 relative): the
+compiled program of a 64 x 64 ggx BTF's texel takes 6.9 ms from the grid and 3.78 steps, 5.1 ms
+and 3.07 steps from its left neighbour's result; ``benchmarks/bench_btf.py --compare`` (64 x 64
+ggx): 3.36 instead of 4.26 steps per texel, 7.7 instead of 8.5 ms of CPU per texel for the whole
+fit_btf. A 16 x 16 mosaic of the 4 RGL materials: 7.75 -> 1.42 steps (a region's texels hold one
+table: the neighbour's result is the answer); a 16 x 16 ggx BTF with maps that change fast from
+texel to texel: 4.27 -> 4.30 (only the grid is saved).
 Within a tile only, so that tiles stay independent (resuming, several processes).
 """
 
@@ -140,8 +140,8 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
     texel, the maps need only these arrays), so a pass is one batch of many texels. With ``neighbours``,
     in the passes of :func:`neighbour_passes` within each tile: the first fits a sparse lattice of texels
     from the initialisation grid, every later one starts each texel from the mean of its nearest fitted
-    neighbours' results, without the grid (see the module docstring); those that do not converge so are fitted again
-    from the grid."""
+    neighbours' results, without the grid (see the module docstring); those that do not converge so are
+    fitted again from the grid."""
     data, space, unit, shapes = loaded if loaded is not None else load_tiles(btf, tiles, mdl, options)
     offsets = np.cumsum([0] + [h * w for h, w in shapes])
     n = int(offsets[-1])
@@ -152,7 +152,8 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
     def fit(texels, starts=None):
         return _fit_texels(run, texels, starts)
 
-    per_tile = [neighbour_passes(h, w) if neighbours else [(np.arange(h * w), np.full((h * w, MAX_SOURCES), -1))] for h, w in shapes]
+    per_tile = [neighbour_passes(h, w) if neighbours else [(np.arange(h * w), np.full((h * w, MAX_SOURCES), -1))]
+                for h, w in shapes]
     first = np.concatenate([off + passes[0][0] for off, passes in zip(offsets, per_tile)])
     for k in range(max(len(p) for p in per_tile)):
         texels = np.concatenate([off + p[k][0] for off, p in zip(offsets, per_tile) if k < len(p)])
