@@ -195,25 +195,25 @@ def vp_grid(model: Model, loss: str):
 
     # Separable models whose linear parameters are all per channel (every model of the library
     # but ashikhmin_shirley): one formula evaluation per grid point gives f_0 and every column
-    # (structure.basis_fn), and the linear least squares splits into one small system per channel.
+    # (objective.basis_fn), and the linear least squares splits into one small system per channel.
     per_channel = separable(model) and all(model.size(p) == C for p in lin)
     basis = basis_fn(model) if per_channel else None
     lin_flat = np.asarray([[start[p.name] + c for p in lin] for c in range(C)], dtype=int)  # (C, L)
 
     def one_per_channel(point, data: Data, lo, hi, free, anchor):
         wi, wo, ref, sqrt_w, cos_i, floor = data
-        F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)
-        b0, B = F[:, -1], F[:, :-1] - F[:, -1:]  # (N,), (N, L)
-        u = sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)  # (N, C)
-        gram = jnp.einsum("nc,nj,nk->cjk", u, B, B)
-        rhs = jnp.einsum("nc,nj->cj", u * (ref - b0[:, None]), B)
+        F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)  # (L + 1, N)
+        b0, B = F[-1], F[:-1] - F[-1:]  # (N,), (L, N)
+        u = (sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)).T  # (C, N)
+        gram = jnp.einsum("cn,jn,kn->cjk", u, B, B)
+        rhs = jnp.einsum("cn,jn->cj", u * (ref.T - b0[None]), B)
         s = jnp.sqrt(jnp.maximum(jnp.diagonal(gram, axis1=1, axis2=2), jnp.finfo(ref.dtype).tiny))  # (C, L)
         elo = jnp.where(free[lin_flat], lo[lin_flat], anchor[lin_flat])
         ehi = jnp.where(free[lin_flat], hi[lin_flat], anchor[lin_flat])
         x = jax.vmap(_box_lsq)(gram / s[:, :, None] / s[:, None, :], rhs / s, elo * s, ehi * s) / s
         x = jnp.clip(x, elo, ehi)  # (C, L)
-        f = b0[:, None] + B @ x.T
-        r = L.residual(loss, f, ref, cos_i, sqrt_w, floor)
+        f = b0[None] + x @ B  # (C, N)
+        r = L.residual(loss, f, ref.T, cos_i.T, sqrt_w.T, floor[:, None])
         value = jnp.sum(r**2)
         v = flat_of(point, jnp.zeros((len(el_flat),), dtype=ref.dtype)).at[lin_flat].set(x)
         return v, jnp.where(jnp.isfinite(value), value, jnp.inf)
