@@ -1,8 +1,9 @@
 """Throughput of ``brdffit.fit_btf`` (docs/btf.md#at-scale) against a loop of ``brdffit.fit``, in one run.
 
-A generated BTF of ``--model`` (default ``ggx``, ``--size`` x ``--size`` texels, smooth parameter maps,
-1 % noise) is fitted with ``fit_btf`` twice: the first run as a user sees it (compiling included, or
-loading the compiled programs from the disk cache), the second warm. In the same run a loop of
+A generated BTF of ``--model`` (default ``ggx``, ``--size`` x ``--size`` texels, smooth parameter maps, or
+with ``--texture B`` B x B blocks of four materials at random; 1 % noise) is fitted with ``fit_btf``
+twice: the first run as a user sees it (compiling included, or loading the compiled programs from the
+disk cache), the second warm. In the same run a loop of
 ``brdffit.fit`` over a random sample of ``--loop`` texels (warmed up first) gives the baseline.
 
 Printed: the device(s) JAX runs on; texels/s of both and their ratio; CPU time per texel; the solver's
@@ -20,6 +21,7 @@ and decode); ``--images`` writes the image folder and reads it with ``load_btf``
 
     python benchmarks/bench_btf.py [--size 64] [--loop 64] [--model ggx] [--tile 16] [--compare]
                                    [--device] [--images] [--processes N] [--one-process] [--cold]
+                                   [--texture B]
 """
 
 from __future__ import annotations
@@ -54,14 +56,18 @@ def cpu_seconds() -> float:
     return total
 
 
-def generate(model_name: str, size: int, folder: str, tile: int, images: bool):
-    """The benchmark's BTF: smooth maps, 1 % noise (in a child process for --images: the image writer
-    holds the whole BTF in memory, and the peak memory printed is the fit's)."""
+def generate(model_name: str, size: int, folder: str, tile: int, images: bool, texture: int = 0):
+    """The benchmark's BTF: smooth maps, or with ``texture`` B x B blocks of four materials at random
+    (``generate.block_maps``); 1 % noise (in a child process for --images: the image writer holds the whole
+    BTF in memory, and the peak memory printed is the fit's)."""
     import brdffit
     from brdffit.btf import generate as gen
 
     model = brdffit.models.get(model_name)
-    truth = gen.smooth_maps(model, size, size, seed=1)
+    if texture:
+        truth = gen.block_maps(model, size, size, texture, seed=1)
+    else:
+        truth = gen.smooth_maps(model, size, size, seed=1)
     if images:
         return str(gen.write_model_btf(Path(folder), model, truth, noise=0.01, seed=2))
     return gen.model_btf(model, truth, Path(folder), noise=0.01, seed=2, tile=tile, name=f"{model_name}-{size}")
@@ -80,6 +86,8 @@ def main() -> None:
                     help="fit_btf's processes (default: its own choice; 1: this process alone)")
     ap.add_argument("--one-process", action="store_true",
                     help="also run fit_btf with processes=1 (first and warm) and print the ratio to it")
+    ap.add_argument("--texture", type=int, default=0, metavar="B",
+                    help="a textured BTF: B x B blocks of four materials at random (default: smooth maps)")
     ap.add_argument("--cold", action="store_true",
                     help="compiled programs kept in a new, empty folder: the first run compiles them all")
     args = ap.parse_args()
@@ -98,13 +106,14 @@ def main() -> None:
         t = time.perf_counter()
         if args.images:
             with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-                folder = pool.submit(generate, args.model, args.size, str(Path(d) / "btf"), args.tile, True).result()
+                folder = pool.submit(generate, args.model, args.size, str(Path(d) / "btf"), args.tile, True,
+                                     args.texture).result()
             print(f"generated {args.size}x{args.size} {args.model} BTF images in {time.perf_counter() - t:.1f} s")
             t = time.perf_counter()
             btf = brdffit.load_btf(folder, tile=args.tile, cache_dir=Path(d) / "cache")
             print(f"load_btf: {time.perf_counter() - t:.1f} s")
         else:
-            btf = generate(args.model, args.size, str(Path(d) / "cache"), args.tile, False)
+            btf = generate(args.model, args.size, str(Path(d) / "cache"), args.tile, False, args.texture)
             print(f"generated {args.size}x{args.size} {args.model} BTF (its tile cache) in {time.perf_counter() - t:.1f} s")
         mem = btf.memory()
         print(f"cache file {mem['cache_file'] / 2**20:.1f} MB, one tile {mem['tile'] / 2**20:.1f} MB; "

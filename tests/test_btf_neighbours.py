@@ -56,16 +56,22 @@ def test_passes_cover_every_texel_once_from_earlier_passes(shape):
         assert len(passes[0][0]) <= h * w / 8
 
 
-def test_a_texel_starts_from_its_neighbours_mean_only_where_they_agree():
+def test_a_texel_starts_from_its_neighbours_mean_where_they_agree_else_from_the_best_of_them():
     """Neighbours that agree (each parameter within AGREE of the mean's magnitude) start a texel from their
-    mean; across an edge between two materials the mean would lie between two basins: the first starts it."""
+    mean; across an edge between two materials the mean would lie between two basins: each of them is a
+    candidate (the first again in the slots of missing ones), and the driver starts from the best."""
     flat = np.array([[1.0, 0.10], [1.2, 0.12], [1.0, 0.10], [9.0, 0.50], [1.1, 0.30]])
     sources = np.array([[0, 1, -1, -1],  # agree: mean (1.1, 0.11)
-                        [2, 3, -1, -1],  # an edge: (1, 0.1) and (9, 0.5) -> the first
+                        [2, 3, -1, -1],  # an edge: (1, 0.1) and (9, 0.5), each a candidate
                         [4, -1, -1, -1],  # one neighbour: itself
-                        [0, 4, -1, -1]])  # first parameter agrees, second not (0.1 against 0.3) -> the first
-    starts = btf_tile.mean_start(flat, sources)
-    np.testing.assert_allclose(starts, [[1.1, 0.11], [1.0, 0.10], [1.1, 0.30], [1.0, 0.10]], rtol=1e-15)
+                        [0, 4, 1, -1]])  # first parameter agrees, second not (0.1 against 0.3): each
+    starts = btf_tile.neighbour_starts(flat, sources)
+    assert starts.shape == (4, btf_tile.MAX_SOURCES, 2)
+    want = [[[1.1, 0.11]] * 4,
+            [[1.0, 0.10], [9.0, 0.50], [1.0, 0.10], [1.0, 0.10]],
+            [[1.1, 0.30]] * 4,
+            [[1.0, 0.10], [1.1, 0.30], [1.2, 0.12], [1.0, 0.10]]]
+    np.testing.assert_allclose(starts, want, rtol=1e-15)
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +96,7 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
     passes = btf_tile.neighbour_passes(6, 6)
     assert [c[0] is None for c in calls] == [True, False, False]  # the grid for the first pass only
     # every later texel started from the mean of the results of its nearest earlier-fitted texels where they
-    # agree, else from the first of them
+    # agree, else from the best of them
     fitted = {}
     for (texels, sources), (starts, v) in zip(passes, calls):
         if starts is not None:
@@ -99,7 +105,8 @@ def test_neighbour_starts_reach_the_grid_starts_results(small_ggx, monkeypatch):
                 near = np.stack([fitted[int(s)] for s in row if s >= 0])
                 mean = near.mean(axis=0)
                 agree = (np.abs(near - mean) <= btf_tile.AGREE * np.abs(mean)).all()
-                want.append(mean if agree else near[0])
+                pad = [near[0]] * (btf_tile.MAX_SOURCES - len(near))
+                want.append([mean] * btf_tile.MAX_SOURCES if agree else [*near, *pad])
             np.testing.assert_allclose(starts, np.stack(want), rtol=1e-15, atol=0)
         fitted.update(zip(texels.tolist(), v))
     flat = np.concatenate([with_nb.params[p.name].reshape(36, -1) for p in btf_fit.resolve_model("ggx", 3).params], 1)
@@ -167,3 +174,13 @@ def test_a_worse_refit_from_the_grid_is_not_kept(small_ggx, monkeypatch):
     first = first.reshape(6, 6)
     np.testing.assert_allclose(maps.loss[~first], 2 * grid_only.loss[~first], rtol=1e-6)  # the x2 kept, not the x3
     assert not maps.converged[~first].any() and maps.converged[first].all()
+
+
+def test_block_maps_are_squares_of_a_few_materials():
+    """``generate.block_maps`` (``bench_btf.py --texture``): B x B squares, each one of ``kinds`` parameter sets."""
+    maps = gen.block_maps("ggx", 10, 7, 3, kinds=4, seed=2)
+    flat = np.concatenate([maps[p.name] for p in btf_fit.resolve_model("ggx", 3).params], axis=-1)  # (10, 7, P)
+    assert flat.shape == (10, 7, 8)
+    r, c = np.meshgrid(np.arange(10), np.arange(7), indexing="ij")
+    np.testing.assert_array_equal(flat, flat[r // 3 * 3, c // 3 * 3])  # constant in each square
+    assert 1 < len(np.unique(flat.reshape(-1, 8), axis=0)) <= 4

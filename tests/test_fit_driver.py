@@ -76,3 +76,41 @@ def test_scipy_is_refused_by_the_batched_entry_points_with_their_own_advice(smal
 def test_a_scipy_fit_records_how_many_starts_it_solved():
     assert brdffit.fit(_measurement(n=80), "ggx", solver="scipy").options["starts"] == 1
     assert brdffit.fit(_measurement(n=80), "ggx", solver="scipy", multistart=2).options["starts"] == 3
+
+
+def test_of_several_given_starts_the_one_that_fits_the_data_best_starts_a_fit(monkeypatch):
+    """Without the grid, a fit handed several candidates that differ starts from the one whose loss on the
+    grid's rows is lowest (a BTF texel between two materials: its neighbours' results); one whose candidates
+    are all the same is not ranked. Two ggx tables far apart (a sharp and a rough lobe)."""
+    import numpy as np
+
+    from brdffit.fitting import driver
+    from brdffit.fitting.lanes import Stages
+    from brdffit.fitting.options import FitOptions
+    from brdffit.fitting.problem import prepare_values
+    from brdffit.grid import ubo_pairs
+
+    model = models.get("ggx")
+    sharp = {"kd": np.array([0.2, 0.3, 0.1]), "ks": np.array([0.6, 0.5, 0.7]), "alpha": np.array([0.05]),
+             "f0": np.array([0.04])}
+    rough = {"kd": np.array([0.5, 0.1, 0.3]), "ks": np.array([0.1, 0.2, 0.1]), "alpha": np.array([0.6]),
+             "f0": np.array([0.04])}
+    wi, wo = ubo_pairs()
+    noise = 1 + 0.01 * np.random.default_rng(7).standard_normal((2, len(wi), 3))
+    values = np.stack([np.asarray(model.eval(p, wi, wo)) for p in (sharp, rough)]) * noise
+    data = prepare_values(values, wi, wo, np.ones(len(wi)))
+    a, b = (np.asarray(model.flatten(p)) for p in (sharp, rough))
+    candidates = np.stack([[b, a, b], [b, b, b]])  # the sharp table's own result second; the rough one's alone
+    ranked = []
+    real = Stages.starts
+
+    def recorded(self, fits, given, k, **kw):
+        ranked.append(np.asarray(fits).tolist())
+        return real(self, fits, given, k, **kw)
+
+    monkeypatch.setattr(Stages, "starts", recorded)
+    options = FitOptions()
+    res = driver.solve(options.space(model), options, data, starts=candidates, grid=False, results=False)
+    assert ranked == [[0]]  # the rough table's three equal candidates are not ranked
+    np.testing.assert_array_equal(res.start, np.stack([a, b]))
+    assert (res.code == 0).all() and res.steps.max() <= 3

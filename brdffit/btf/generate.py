@@ -58,6 +58,17 @@ def smooth_maps(model, height: int, width: int, seed: int = 0) -> dict[str, np.n
     return out
 
 
+def block_maps(model, height: int, width: int, block: int, kinds: int = 4, seed: int = 0) -> dict[str, np.ndarray]:
+    """Per-parameter maps (H, W, size) of a textured surface: ``block`` x ``block`` squares, each one of
+    ``kinds`` materials at random, their parameters drawn as :func:`smooth_maps` draws them (a texel's
+    neighbours often hold another material; ``block`` 1: any texel's)."""
+    sets = smooth_maps(model, kinds, kinds, seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    labels = rng.integers(0, kinds, (-(-height // block), -(-width // block)))
+    labels = np.repeat(np.repeat(labels, block, axis=0), block, axis=1)[:height, :width]
+    return {name: v[np.arange(kinds), np.arange(kinds)][labels] for name, v in sets.items()}
+
+
 def model_tables(model, maps: Mapping[str, np.ndarray], *, chunk: int = 4096):
     """Yield (light index, (H, W, 81, C) f_r of that light's 81 views) for parameter maps."""
     import jax

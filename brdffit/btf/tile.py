@@ -5,10 +5,15 @@ texels are fitted in passes over nested lattices (:func:`neighbour_passes`, stri
 the first pass (1/16 of the texels) starts from the initialisation grid like ``fit``, every
 later texel starts from the mean of the results of its nearest texels fitted in an earlier pass
 (those at the nearest distance, 1 or 1.4 texels away: up to four, which surround it) where they
-agree (``AGREE``), else from the first of them, without the grid; a texel that does not converge
-so is fitted again from the grid. The mean of the surrounding results is nearer a smooth map's
-value than any one of them: a 64 x 64 ggx BTF's texels took 1.96 instead of 2.49 steps on
-average, 837 instead of 685-721 texels/s on one core (``benchmarks/README.md``).
+agree (``AGREE``), else from the one of them whose result fits the texel's data best (ranked on the
+grid's rows, as the grid's points are), without the grid; a texel that does not converge so is
+fitted again from the grid. The mean of the surrounding results is nearer a smooth map's value
+than any one of them: a 64 x 64 ggx BTF's texels took 1.96 instead of 2.49 steps on average, 837
+instead of 685-721 texels/s on one core. Where they disagree the texel lies at an edge between
+materials, or in a texture that changes from texel to texel: the first of them, taken before,
+was often another material's (a 32 x 32 ggx BTF of four materials in 3 x 3 blocks: 2.85 -> 1.75
+steps a texel, 713 -> 802 texels/s on one core; in blocks of one texel 4.75 -> 3.45 steps,
+501 -> 539 texels/s; ``benchmarks/README.md``).
 
 Neighbour starts against the grid, measured when they were built (CPU time, which a shared machine
 disturbs less than wall time; losses equal to the grid-started fits within 1e-7 relative): the
@@ -159,7 +164,7 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
         texels = np.concatenate([off + p[k][0] for off, p in zip(offsets, per_tile) if k < len(p)])
         sources = np.concatenate([np.where(p[k][1] < 0, -1, off + p[k][1]) for off, p in zip(offsets, per_tile)
                                   if k < len(p)])
-        v, value, converged, steps = fit(texels, None if k == 0 else mean_start(flat, sources))
+        v, value, converged, steps = fit(texels, None if k == 0 else neighbour_starts(flat, sources))
         flat[texels] = v
         out["loss"][texels], out["converged"][texels], out["steps"][texels] = value, converged, steps
     # A texel started from a neighbour that did not converge (a neighbour of another material, in
@@ -182,17 +187,18 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
     return results
 
 
-def mean_start(flat: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """Starts (n, P): per row of ``sources`` (n, MAX_SOURCES; -1 for none), the mean of those rows of the
-    fitted ``flat`` where they agree (every parameter within ``AGREE`` of the mean's magnitude), else the
-    first of them. Each row is a point of the box, so their mean is one too, and lobes ordered in each
-    stay ordered."""
+def neighbour_starts(flat: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """Start candidates (n, MAX_SOURCES, P): per row of ``sources`` (n, MAX_SOURCES; -1 for none), the mean
+    of those rows of the fitted ``flat`` where they agree (every parameter within ``AGREE`` of the mean's
+    magnitude), alone; else each of them (the first again where there are fewer): the driver then starts
+    the texel from the one whose result fits its data best (``driver.solve``, ranked on the grid's rows).
+    Each row is a point of the box, so their mean is one too, and lobes ordered in each stay ordered."""
     own = sources >= 0
-    rows = flat[np.where(own, sources, 0)]  # (n, MAX_SOURCES, P)
+    rows = flat[np.where(own, sources, sources[:, :1])]  # (n, MAX_SOURCES, P): -1 -> the first
     mean = (rows * own[..., None]).sum(axis=1) / own.sum(axis=1)[:, None]
     spread = np.where(own[..., None], np.abs(rows - mean[:, None]), 0.0).max(axis=1)  # (n, P)
     agree = np.all(spread <= AGREE * np.abs(mean), axis=1)
-    return np.where(agree[:, None], mean, rows[:, 0])
+    return np.where(agree[:, None, None], mean[:, None], rows)
 
 
 class _Texels(NamedTuple):
@@ -208,8 +214,8 @@ class _Texels(NamedTuple):
 
 def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = None):
     """The fit driver on ``texels`` (rows of the group's data; ``driver.solve``: no FitResult per texel, the
-    maps need only these arrays), from the grid, or from ``starts`` (n, P) alone. Returns flat params
-    (n, P), loss, converged, steps."""
+    maps need only these arrays), from the grid, or from ``starts`` (n, E, P) alone (the best of a texel's
+    candidates where they differ). Returns flat params (n, P), loss, converged, steps."""
     from ..fitting.driver import solve
 
     res = solve(run.space, run.options, run.data, unit=run.unit, fits=texels, starts=starts, grid=starts is None,

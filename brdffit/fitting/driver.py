@@ -83,8 +83,9 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;
     the results' rows follow ``fits``. ``unit``: the unit the fits are solved in (``problem.data_unit`` of
     the table: 1, or a power of ten); ``data``, ``space``, ``starts`` and every result are in the table's.
-    ``starts``: (len(fits), P) given starts, ranked beside the grid's
-    points (``grid``), or the only ones. ``results``: also every metric and J^T J (for FitResults; else the
+    ``starts``: (len(fits), P) given starts, or (len(fits), E, P) E candidates each, ranked beside the grid's
+    points (``grid``); without the grid a fit's candidates are ranked where they differ (on the grid's
+    rows, as its points are), and the best starts it. ``results``: also every metric and J^T J (for FitResults; else the
     loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
     not converged when it ends far above that (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with
     the share of the fits whose solves ended, as they end."""
@@ -98,8 +99,14 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     # reflectance's range under a loss a unit only rescales).
     run = table if unit == 1.0 else Stages(space.in_unit(unit), options, in_unit(data, unit), note, table.seconds)
     space = run.space
-    given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, 1, P)
-    candidates = run.starts(fits, given, k) if grid else given
+    given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, -1, P)
+    if grid:
+        candidates = run.starts(fits, given, k)
+    else:  # the given starts alone: where a fit has several that differ, the best on the grid's rows
+        candidates = given[:, :1].copy()
+        choice = np.flatnonzero(np.any(given != given[:, :1], axis=(1, 2)))
+        if len(choice):
+            candidates[choice] = run.starts(fits[choice], given[choice], 1, grid=False)
     k = candidates.shape[1]
     r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress)
     best = _best_of(r.loss, n, k)

@@ -248,16 +248,17 @@ class Stages:
         if init:
             self.seconds["init"] += compile_s + run_s
 
-    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None):
+    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None, grid: bool = True):
         """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
-        each fit's own: ``grids`` (n, G, m)) and the ``given`` (n, E, P), ranked on ``subset``'s rows; fewer
-        (at least one) where there are not k of them."""
+        each fit's own: ``grids`` (n, G, m); none without ``grid``) and the ``given`` (n, E, P), ranked on
+        ``subset``'s rows; fewer (at least one) where there are not k of them."""
         from .init import cached_grid, subset_rows
         from .stages import per_lane, start_stage
 
-        o = self.options
         lo, hi, free = self.bounds
-        if grids is None:
+        if not grid:
+            points, lane_args = np.zeros((0, 1)), given
+        elif grids is None:
             points = cached_grid(self.model, lo, hi, free, self.space.anchor)
             lane_args = given
         else:
@@ -265,7 +266,7 @@ class Stages:
         k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
         if subset is None:
             subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
-        key = (self.objective, k, True, self.plan.lanes)
+        key = (self.objective, k, grid, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
         self._count(c_s, r_s, init=True)
