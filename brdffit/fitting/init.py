@@ -214,6 +214,10 @@ def vp_grid(model: Model, loss: str):
         x = jnp.clip(x, elo, ehi)  # (C, L)
         f = b0[None] + x @ B  # (C, N)
         r = L.residual(loss, f, ref.T, cos_i.T, sqrt_w.T, floor[:, None])
+        # A non-finite residual makes the point's value infinite (as a NaN value is below). The select also keeps
+        # XLA from handing the whole log loss to the YNNPACK fusion of the sum, where it ran at ~5 ns a value
+        # against ~2 ns in XLA's own loop: ggx's start stage 0.68-0.74 -> 0.43-0.53 ms a lane on one core.
+        r = jnp.where(jnp.isfinite(r), r, jnp.inf)
         value = jnp.sum(r**2)
         v = flat_of(point, jnp.zeros((len(el_flat),), dtype=ref.dtype)).at[lin_flat].set(x)
         return v, jnp.where(jnp.isfinite(value), value, jnp.inf)
@@ -247,6 +251,7 @@ def vp_grid(model: Model, loss: str):
             x = jnp.clip(x, elo, ehi)
             f = f0 + jnp.einsum("ncl,l->nc", A, x)
         r = L.residual(loss, f, ref, cos_i, sqrt_w, floor)
+        r = jnp.where(jnp.isfinite(r), r, jnp.inf)  # as in one_per_channel
         value = jnp.sum(r**2)
         return flat_of(point, x), jnp.where(jnp.isfinite(value), value, jnp.inf)
 

@@ -131,6 +131,7 @@ def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
 
         def subset_loss(v):
             r = residual(v, sub)
+            r = jnp.where(jnp.isfinite(r), r, jnp.inf)  # as in init.vp_grid: the loss computed in XLA's own loop
             value = r @ r
             return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
