@@ -150,3 +150,53 @@ def test_the_geometry_split_gives_the_basis_and_its_partials_unchanged(name):
     for a, b in zip(got, want):
         assert a.shape == b.shape
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-14)
+
+
+def _float32_jacobian_error(mdl):
+    """The float32 Jacobian's normal equations against the dense float64 ones at a random point, with the once-
+    per-fit terms as a solver passes them: (the loss's error, J^T r's, J^T J's; relative to each one's largest
+    entry), and the float64 values the step's route gives beside model.eval's."""
+    from brdffit.fitting.losses import reference_transform
+    from brdffit.fitting.objective import model_values, precompute_geometry
+
+    prep = _data(seed=4)
+    wi, wo, ref, sqrt_w, cos_i, floor = prep.data
+    v = jnp.asarray(np.asarray(mdl.flatten(mdl.sample(jax.random.PRNGKey(4), margin=0.05))))
+    geometry = jax.jit(lambda d: precompute_geometry(mdl, d, "float32"))(prep.data)
+    exact, low = geometry
+    assert all(a.dtype == jnp.float32 for a in jax.tree_util.tree_leaves(low) if jnp.issubdtype(a.dtype, jnp.floating))
+    got = jax.jit(lambda v, d, g, geo: normal_equations(mdl, "log", "float32")(v, d, g, geo))(
+        v, prep.data, reference_transform("log", ref, cos_i, floor), geometry)
+    want = jax.jit(dense_normal_equations(mdl, "log"))(v, prep.data)
+    assert all(np.asarray(a).dtype == np.float64 for a in got)
+    errors = [np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(np.asarray(b))) for a, b in zip(got, want)]
+    values = np.asarray(jax.jit(model_values(mdl, "float32"))(v, prep.data, geometry))
+    return errors, values, np.asarray(mdl.eval(mdl.unflatten(v), wi, wo))
+
+
+@pytest.mark.parametrize("name", [n for n in MODELS if separable(resolve_model(n, 3))])
+def test_a_float32_jacobian_keeps_the_loss_exact_and_the_rest_to_float32(name):
+    """``jacobian="float32"`` (fit_btf's texels) where a model declares it (``Model.float32_jacobian``): the loss
+    r.r is the float64 one to rounding (a step is accepted, and a fit stops, on it), J^T r and J^T J equal the
+    dense float64 ones to float32's precision (and are not float64's), and the values the result check and the
+    finish read are float64's. A model that does not declare it keeps float64, and is right not to: its
+    float32 partials are not finite or far off."""
+    from brdffit.fitting.objective import objective_of
+
+    mdl = resolve_model(name, 3)
+    errors, values, want = _float32_jacobian_error(mdl)
+    if not mdl.float32_jacobian:
+        assert objective_of(mdl, "log", "float32").jacobian == "float64"
+        assert not np.all(np.isfinite(errors)) or max(errors[1:]) > 1e-4, (name, errors)
+        return
+    assert objective_of(mdl, "log", "float32").jacobian == "float32"
+    loss, g, H = errors
+    assert loss < 1e-12, (name, errors)
+    assert 1e-12 < g < 2e-5 and 1e-12 < H < 2e-5, (name, errors)
+    np.testing.assert_allclose(values, want, rtol=1e-12, atol=1e-14 * np.max(np.abs(want)), err_msg=name)
+
+
+def test_a_model_of_the_other_route_keeps_a_float64_jacobian():
+    from brdffit.fitting.objective import objective_of
+
+    assert objective_of(resolve_model("ashikhmin_shirley", 3), "log", "float32").jacobian == "float64"

@@ -83,7 +83,9 @@ def fit_options(loss: str, solver: str | None, batch_options: dict):
     unknown = sorted(set(given) - set(_OPTIONS))
     if unknown:
         raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
-    return FitOptions(loss=loss, **given).batched("fit_btf"), given
+    # A texel's Jacobian in float32 (``objective.JACOBIANS``: its loss stays exact; measured equal to float64's
+    # fits within 1e-6 relative): its evaluation ~20 % cheaper on a CPU, and half the arrays' memory.
+    return FitOptions(loss=loss, jacobian="float32", **given).batched("fit_btf"), given
 
 
 def fit_btf(

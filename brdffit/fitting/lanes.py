@@ -176,8 +176,9 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
 
 
 def _key(stage: str, objective, *options) -> tuple:
-    """A compiled stage's key (``cache.compiled``): the stage, the model and loss it evaluates, its options."""
-    return (stage, objective.model, objective.loss, *options)
+    """A compiled stage's key (``cache.compiled``): the stage, the model and loss it evaluates (and the precision
+    of its Jacobian), its options."""
+    return (stage, objective.model, objective.loss, objective.jacobian, *options)
 
 
 def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
@@ -237,7 +238,7 @@ class Stages:
     def __init__(self, space, options, data: Data, note, seconds: dict | None = None):
         self.space, self.options, self.data, self.note = space, options, data, note
         self.model = space.model
-        self.objective = objective_of(self.model, options.loss)
+        self.objective = objective_of(self.model, options.loss, options.jacobian)
         self.plan = plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds

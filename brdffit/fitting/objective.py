@@ -118,11 +118,16 @@ def basis_fn(model: Model):
 
 
 @functools.lru_cache(maxsize=None)
-def normal_equations(model: Model, loss: str):
+def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
     """(v (P,), data, g_ref=None, geometry=None) -> (r.r, J^T r (P,), J^T J (P, P)), by the
     cheapest exact route for this model (see the module docstring); equal to the dense computation
     to rounding. ``g_ref`` (``losses.reference_transform`` of the data) and ``geometry``
-    (:func:`precompute_geometry`) are what a solver computes once per fit."""
+    (:func:`precompute_geometry`) are what a solver computes once per fit.
+
+    ``jacobian="float32"`` (a :func:`separable` model; see ``JACOBIANS``): the Jacobian's rows, J^T J and
+    J^T r in float32, from the direction-only terms in float32 (``geometry`` is then the pair
+    :func:`precompute_geometry` gives); the model's values, the residuals and the loss r.r stay in the
+    data's precision, so a step is accepted or refused, and a fit stops, on the exact loss."""
     S = compression(model)
     C = model.channels
     if not separable(model):
@@ -151,10 +156,17 @@ def normal_equations(model: Model, loss: str):
 
     pairs = [(a, b) for a in range(len(model.params)) for b in range(a, len(model.params))]
 
+    low = jnp.dtype(jacobian)
+
     def structured(v, data: Data, g_ref=None, geometry=None):
         wi, wo = data[0], data[1]
         theta, lam = split(v)
-        if geometry is not None:
+        mixed = low != v.dtype
+        if geometry is not None and mixed:  # the basis from the exact terms, its partials from the low ones
+            exact, terms = geometry
+            F = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, exact)[0]
+            dF = geometry_split(model, wi.shape[0], str(low)).finish(theta.astype(low), terms)[1]
+        elif geometry is not None:
             F, dF = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)
         else:
             F, dF = basis_and_partials(basis, len(nonlin))(theta, wi, wo)
@@ -167,11 +179,14 @@ def normal_equations(model: Model, loss: str):
         # compile options), with the basis's samples last (basis_fn): 0.41 -> 0.37 ms per evaluation.
         one = jax.lax.optimization_barrier(jnp.ones((), F.dtype))
         Ft = F / one
-        dFt = dF / one if nonlin else None
+        dFt = dF / one.astype(dF.dtype) if nonlin else None
         B, B0 = Ft[:n_lin] - Ft[n_lin:], Ft[n_lin]
         f = B0[None] + sum(lam[j][:, None] * B[j][None] for j in range(n_lin))  # (C, N)
         r, slope = _residual_and_slope_t(loss, f, data, g_ref)
         r, slope = r / one, slope / one
+        loss_value = jnp.sum(r * r)
+        if mixed:  # the Jacobian's rows and their sums in the low precision
+            r, slope, B, lam = r.astype(low), slope.astype(low), B.astype(low), lam.astype(low)
         rows = [None] * len(model.params)
         for j, k in enumerate(lin):
             rows[k] = slope * B[j][None]
@@ -184,12 +199,12 @@ def normal_equations(model: Model, loss: str):
         blocks = [[None] * len(rows) for _ in rows]
         for (a, b), g in zip(pairs, G):
             blocks[a][b] = blocks[b][a] = g
-        Gc = jnp.stack([jnp.stack(row) for row in blocks])  # (K, K, C)
-        gc = jnp.stack([jnp.sum(row * r, axis=-1) for row in rows])  # (K, C)
+        Gc = jnp.stack([jnp.stack(row) for row in blocks]).astype(v.dtype)  # (K, K, C)
+        gc = jnp.stack([jnp.sum(row * r, axis=-1) for row in rows]).astype(v.dtype)  # (K, C)
         Sv = jnp.asarray(S, v.dtype)
         H = jnp.einsum("ckp,klc,clq->pq", Sv, Gc, Sv)
         g = jnp.einsum("ckp,kc->p", Sv, gc)
-        return jnp.sum(r * r), g, H
+        return loss_value, g, H
 
     return structured
 
@@ -260,7 +275,7 @@ class FitConstants(NamedTuple):
     loss_floor: jax.Array  # () the loss of an exact fit (residuals at roundoff level)
 
 
-def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitConstants:
+def fit_constants(model: Model, loss: str, data: Data, geometry=None, jacobian: str = "float64") -> FitConstants:
     """What every step of a fit shares and computes once (jit-able): g(f_ref) of the loss
     (``losses.reference_transform``), the direction-only terms of a separable model
     (:func:`precompute_geometry`, or None; ``geometry``: already computed, for the directions
@@ -268,7 +283,7 @@ def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitCons
     f = 0: residuals at roundoff level)."""
     wi, wo, ref, sqrt_w, cos_i, floor = data
     if geometry is None:
-        geometry = precompute_geometry(model, data)
+        geometry = precompute_geometry(model, data, jacobian)
     # Computed with the channels first, (C, N): XLA vectorises the last axis, and N x 3 it runs as N
     # rows of three (ggx/UBO-81's log transform: 0.49 -> 0.09 ms, a fifth of a texel's solve).
     # Materialised once: XLA would otherwise recompute g(f_ref) (a log1p per value) inside every
@@ -279,10 +294,10 @@ def fit_constants(model: Model, loss: str, data: Data, geometry=None) -> FitCons
     return FitConstants(None if g_t is None else g_t.T, geometry, 1e-26 * jnp.sum(r0 * r0))
 
 
-def model_loss(model: Model, loss: str):
+def model_loss(model: Model, loss: str, jacobian: str = "float64"):
     """loss_of(v, data, consts): the fit's loss at v, the model's values by the step's route
     (:func:`model_values`: model.eval costs ~10x more on ggx/UBO-81)."""
-    values = model_values(model)
+    values = model_values(model, jacobian)
 
     def loss_of(v, data, consts):
         wi, wo, ref, sqrt_w, cos_i, floor = data
@@ -363,20 +378,26 @@ def geometry_split(model: Model, n: int, dtype: str) -> GeometrySplit:
     return GeometrySplit(model, n, dtype)
 
 
-def precompute_geometry(model: Model, data: Data):
+def precompute_geometry(model: Model, data: Data, jacobian: str = "float64"):
     """The direction-only part of a separable model's step (see :class:`GeometrySplit`), or None
-    (a model of the other route, or one whose formula JAX cannot split)."""
+    (a model of the other route, or one whose formula JAX cannot split). With a ``jacobian`` precision
+    below the data's: the pair (the terms, the terms in that precision) that :func:`normal_equations`
+    reads (the partials' share computed from the low ones)."""
     if not separable(model):
         return None
     wi, wo = data[0], data[1]
     try:
-        return geometry_split(model, wi.shape[0], str(wi.dtype)).precompute(wi, wo)
+        terms = geometry_split(model, wi.shape[0], str(wi.dtype)).precompute(wi, wo)
     except Exception:  # noqa: BLE001 - the unsplit step is exact too, only slower
         return None
+    low = jnp.dtype(jacobian)
+    if low == wi.dtype:
+        return terms
+    return terms, tuple(a.astype(low) if jnp.issubdtype(a.dtype, jnp.floating) else a for a in terms)
 
 
 @functools.lru_cache(maxsize=None)
-def model_values(model: Model):
+def model_values(model: Model, jacobian: str = "float64"):
     """(v (P,), data, geometry=None) -> f (N, C): the model's values, by the step's route when the
     model is :func:`separable` and ``geometry`` (:func:`precompute_geometry`) is given
     (f = B_0 + B lambda from the direction-only terms: ~0.1 ms on ggx/UBO-81, where
@@ -389,6 +410,8 @@ def model_values(model: Model):
         if geometry is None or not separable(model):
             return model.eval(model.unflatten(v), wi, wo)
         theta, lam = split(v)
+        if jnp.dtype(jacobian) != wi.dtype:
+            geometry = geometry[0]  # (the exact terms, the Jacobian's): precompute_geometry
         F, _ = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)  # partials: dead code
         return _from_basis(F, lam, n_lin)[0]
 
@@ -402,6 +425,7 @@ class Objective(NamedTuple):
 
     model: Model
     loss: str
+    jacobian: str  # the precision of the Jacobian's rows and sums (``JACOBIANS``)
     residual: Callable  # (v, data) -> r (M,), the loss's residuals at a flat vector (:func:`flat_residual`)
     normal_equations: Callable  # (v, data, g_ref=None, geometry=None) -> (r.r, J^T r, J^T J)
     values: Callable  # (v, data, geometry=None) -> f (N, C), by the step's route (:func:`model_values`)
@@ -410,13 +434,24 @@ class Objective(NamedTuple):
     geometry: Callable  # (data) -> the direction-only terms, or None (:func:`precompute_geometry`)
 
 
+#: The precisions of a step's Jacobian (``FitOptions.jacobian``): "float64", or "float32" for a :func:`separable`
+#: model that declares it safe (``Model.float32_jacobian``): its rows, J^T J and J^T r; the loss stays exact.
+#: Measured on the shared measured files (benchmarks/README.md): the fits' losses equal the float64 ones within
+#: 4.7e-7 relative, in the same steps; ggx's evaluation 0.31 -> 0.25 ms on one core.
+JACOBIANS = ("float64", "float32")
+
+
 @functools.lru_cache(maxsize=None)
-def objective_of(model: Model, loss: str) -> Objective:
-    """The :class:`Objective` of ``model`` under ``loss`` (one per process: the stages' compiled programs
-    are kept per objective)."""
-    return Objective(model, loss, flat_residual(model, loss), normal_equations(model, loss), model_values(model),
-                     model_loss(model, loss), functools.partial(fit_constants, model, loss),
-                     functools.partial(precompute_geometry, model))
+def objective_of(model: Model, loss: str, jacobian: str = "float64") -> Objective:
+    """The :class:`Objective` of ``model`` under ``loss``, its Jacobian in the precision ``jacobian`` where the
+    model is :func:`separable` and declares its partials safe in float32 (``Model.float32_jacobian``; else
+    float64: the other route's Jacobian is forward mode through the model), one per process: the stages'
+    compiled programs are kept per objective."""
+    jacobian = jacobian if separable(model) and model.float32_jacobian else "float64"
+    return Objective(model, loss, jacobian, flat_residual(model, loss), normal_equations(model, loss, jacobian),
+                     model_values(model, jacobian), model_loss(model, loss, jacobian),
+                     functools.partial(fit_constants, model, loss, jacobian=jacobian),
+                     functools.partial(precompute_geometry, model, jacobian=jacobian))
 
 
 def dense_normal_equations(model: Model, loss: str):

@@ -18,6 +18,7 @@ from .._fit_defaults import (COMPOSITE_STARTS, DEFAULT_ATOL, DEFAULT_LOSS, DEFAU
 from ..errors import UsageError
 from ..models.base import Model
 from .losses import check_loss
+from .objective import JACOBIANS
 from .space import ParameterSpace, parameter_space
 from .stages import check_solver
 
@@ -54,6 +55,9 @@ class FitOptions:
     #: (``lanes.plan``).
     chunk: int | None = None
     lanes: int | None = None
+    #: The precision of a step's Jacobian (``objective.JACOBIANS``): "float64", or "float32" (a separable
+    #: model's rows and sums; the loss stays exact), which ``fit_btf`` chooses.
+    jacobian: str = "float64"
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: the checked values replace the given ones once, here
@@ -77,6 +81,8 @@ class FitOptions:
                     raise UsageError("fit_batch: chunk and lanes must be at least 1")
                 set_(self, name, int(value))
         set_(self, "physical", bool(self.physical))
+        if self.jacobian not in JACOBIANS:
+            raise UsageError(f"jacobian must be one of {', '.join(JACOBIANS)}, not {self.jacobian!r}")
 
     def batched(self, who: str) -> "FitOptions":
         """These options for a batch of fits (``who`` names the caller in the refusal): scipy runs

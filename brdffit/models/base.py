@@ -196,6 +196,11 @@ class Model:
     formula: Formula
     citation: str
     reciprocal: bool = True
+    #: Whether a fit may compute this formula's Jacobian in float32 (``FitOptions.jacobian``: fit_btf's texels;
+    #: the loss stays float64): True where its partials keep float32's precision for every parameter in bounds
+    #: (tested, ``tests/test_structure.py``). False by default and where they do not: lafortune's powers of
+    #: the cosine overflow (NaN), roughplastic's tabulated quadratures lose digits (2e-4 relative).
+    float32_jacobian: bool = False
     channels: int = 3
     #: Documentation: the lecture form and how it maps to the BRDF form implemented.
     doc: str = ""

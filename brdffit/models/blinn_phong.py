@@ -75,6 +75,7 @@ MODEL = Model(
     formula=formula,
     citation="J. F. Blinn, Models of Light Reflection for Computer Synthesized Pictures, SIGGRAPH 1977",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -133,6 +133,7 @@ def compose(components: Sequence[Model]) -> Model:
         formula=functools.partial(_sum_formula, tuple(parts)),
         citation="; ".join(dict.fromkeys(c.citation for c in components)),
         reciprocal=all(c.reciprocal for c in components),
+        float32_jacobian=all(c.float32_jacobian for c in components),
         channels=components[0].channels,
         doc=doc,
         components=components,

@@ -96,6 +96,7 @@ MODEL = Model(
     formula=formula,
     citation="R. L. Cook, K. E. Torrance, A Reflectance Model for Computer Graphics, ACM TOG 1(1), 1982",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -88,6 +88,7 @@ MODEL = Model(
     formula=formula,
     citation="Walter, Marschner, Li, Torrance: Microfacet Models for Refraction through Rough Surfaces, EGSR 2007",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -49,6 +49,7 @@ MODEL = Model(
     formula=formula,
     citation="J. H. Lambert, Photometria, 1760",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     sampling=sampling,
 )

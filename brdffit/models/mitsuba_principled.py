@@ -171,6 +171,7 @@ MODEL = Model(
     formula=formula,
     citation="Mitsuba 3 principled; Burley: Physically Based Shading at Disney, SIGGRAPH 2012 course notes",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     lobes=(Lobe("mitsuba:principled", tuple(p.name for p in PARAMS if p.name != "base_color")),),
     halfwidth=halfwidth,

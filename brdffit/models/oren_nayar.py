@@ -67,6 +67,7 @@ MODEL = Model(
     formula=formula,
     citation="M. Oren, S. K. Nayar, Generalization of Lambert's Reflectance Model, SIGGRAPH 1994",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     sampling=sampling,
 )

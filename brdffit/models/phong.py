@@ -80,6 +80,7 @@ MODEL = Model(
     citation="B. T. Phong, Illumination for Computer Generated Pictures, CACM 18(6), 1975; "
     "normalisation: R. R. Lewis, Making Shaders More Physically Plausible, CGF 13(2), 1994",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -71,6 +71,7 @@ MODEL = Model(
     formula=formula,
     citation="B. T. Phong, Illumination for Computer Generated Pictures, CACM 18(6), 1975",
     reciprocal=False,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -89,6 +89,7 @@ MODEL = Model(
     citation="K. E. Torrance, E. M. Sparrow, Theory for Off-Specular Reflection from Roughened Surfaces, "
     "JOSA 57(9), 1967",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,

@@ -75,6 +75,7 @@ MODEL = Model(
     formula=formula,
     citation="G. J. Ward, Measuring and Modeling Anisotropic Reflection, SIGGRAPH 1992",
     reciprocal=True,
+    float32_jacobian=True,  # measured: tests/test_structure.py, benchmarks/README.md
     doc=__doc__,
     halfwidth=halfwidth,
     sampling=sampling,
