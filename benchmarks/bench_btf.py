@@ -12,7 +12,8 @@ fit_btf's time went (reading and preparing tiles, in a thread beside the solves;
 stages, i.e. the device's share; the rest, Python on the host; with worker processes, ``--processes``,
 summed over them); the process's peak resident memory (and the workers');
 with ``--device`` the accelerator's peak memory. ``--one-process`` also runs ``fit_btf(..., processes=1)`` and
-prints the ratio to it. ``--compare`` also runs ``fit_btf(..., neighbours=False)``
+prints the ratio to it. ``--jacobian64`` also runs ``fit_btf(..., jacobian="float64")`` (the Jacobian in float64, as
+``fit``'s) and prints the ratio to it. ``--compare`` also runs ``fit_btf(..., neighbours=False)``
 (every texel from the initialisation grid). ``--cold`` keeps compiled programs in a new, empty folder
 (``BRDFFIT_CACHE``), so that the first run compiles every program it needs, as on a new machine.
 
@@ -88,6 +89,8 @@ def main() -> None:
                     help="also run fit_btf with processes=1 (first and warm) and print the ratio to it")
     ap.add_argument("--texture", type=int, default=0, metavar="B",
                     help="a textured BTF: B x B blocks of four materials at random (default: smooth maps)")
+    ap.add_argument("--jacobian64", action="store_true",
+                    help="also run fit_btf with jacobian='float64' (first and warm) and print the ratio to it")
     ap.add_argument("--cold", action="store_true",
                     help="compiled programs kept in a new, empty folder: the first run compiles them all")
     args = ap.parse_args()
@@ -135,17 +138,24 @@ def main() -> None:
         runs = [(True, "first", args.processes), (True, "warm", args.processes)]
         runs += [(True, "first", 1), (True, "warm", 1)] if args.one_process else []
         runs += [(False, "first", args.processes), (False, "warm", args.processes)] if args.compare else []
+        runs = [(*r, None) for r in runs]
+        runs += [(True, "first", args.processes, "float64"), (True, "warm", args.processes, "float64")] \
+            if args.jacobian64 else []
         rates = {}
-        for neighbours, which, processes in runs:
+        for neighbours, which, processes, jacobian in runs:
             t, cpu = time.perf_counter(), cpu_seconds()
-            maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours, processes=processes)
+            maps = brdffit.fit_btf(btf, model, progress=False, neighbours=neighbours, processes=processes,
+                                   **({} if jacobian is None else {"jacobian": jacobian}))
             fit_s, cpu_s = time.perf_counter() - t, cpu_seconds() - cpu
-            rate = rates[neighbours, which, processes] = n / fit_s
+            rate = n / fit_s
+            if jacobian is None:
+                rates[neighbours, which, processes] = rate
             info = maps.info
             workers = info.get("worker_processes")
             steps = maps.steps.ravel()
             counts = np.bincount(steps)
-            print(f"fit_btf (neighbours={neighbours}, processes={processes}, {which} run): {n} texels in {fit_s:.2f} s = "
+            label = f"neighbours={neighbours}, processes={processes}" + (f", jacobian={jacobian}" if jacobian else "")
+            print(f"fit_btf ({label}, {which} run): {n} texels in {fit_s:.2f} s = "
                   f"{rate:.1f} texels/s{' (compile included)' if which == 'first' else ''}; CPU time "
                   f"{cpu_s / n * 1e3:.3f} ms per texel{' (the workers included)' if workers else ''}; "
                   f"{int(maps.converged.sum())}/{n} converged; "
@@ -153,6 +163,9 @@ def main() -> None:
                      if workers else "in this process"))
             if loop_rate:
                 print(f"  ratio fit_btf / loop of fit: {rate / loop_rate:.1f}x")
+            if which == "warm" and jacobian:
+                print(f"  ratio fit_btf (its float32 Jacobian) / fit_btf (jacobian={jacobian}), warm: "
+                      f"{rates[True, 'warm', args.processes] / rate:.2f}x")
             if which == "warm" and processes == 1 and (True, "warm", args.processes) in rates and args.processes != 1:
                 print(f"  ratio fit_btf (processes={args.processes}) / fit_btf (processes=1), warm: "
                       f"{rates[True, 'warm', args.processes] / rate:.2f}x")

@@ -47,7 +47,8 @@ from .maps import ParameterMaps
 from .reader import BTF
 
 #: fit_btf's keyword options (``FitOptions``' fields that a batch takes).
-_OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes", "multistart", "bounds", "fixed", "physical")
+_OPTIONS = ("solver", "max_steps", "rtol", "atol", "chunk", "lanes", "multistart", "bounds", "fixed", "physical",
+            "jacobian")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -85,7 +86,7 @@ def fit_options(loss: str, solver: str | None, batch_options: dict):
         raise UsageError(f"fit_btf: unknown option(s) {', '.join(unknown)}")
     # A texel's Jacobian in float32 (``objective.JACOBIANS``: its loss stays exact; measured equal to float64's
     # fits within 1e-6 relative): its evaluation ~20 % cheaper on a CPU, and half the arrays' memory.
-    return FitOptions(loss=loss, jacobian="float32", **given).batched("fit_btf"), given
+    return FitOptions(loss=loss, **{"jacobian": "float32", **given}).batched("fit_btf"), given
 
 
 def fit_btf(
@@ -107,7 +108,9 @@ def fit_btf(
 
     ``solver`` and further keyword arguments (``max_steps``, ``rtol``, ``atol``, ``chunk``,
     ``lanes``, ``multistart``, ``bounds``, ``fixed``, ``physical``) mean what they mean for
-    ``brdffit.fit_batch`` (its default solver when None). ``out``: folder for the results and
+    ``brdffit.fit_batch`` (its default solver when None); ``jacobian``: the precision of a step's Jacobian,
+    "float32" by default here where the model declares it safe (``Model.float32_jacobian``; the loss is
+    float64's), "float64" as ``fit``'s (docs/fitting.md#solvers). ``out``: folder for the results and
     the resumable tiles. ``progress``: a bar on stderr (default: when stderr is a terminal).
     ``max_tiles``: stop after fitting this many tiles (returns None; for tests of resuming and for
     splitting work by hand). ``neighbours``: start most texels from their fitted neighbours' results
