@@ -79,7 +79,7 @@ def test_code_default_reads_a_constant_and_a_signature():
 def test_the_relative_rmse_is_rel_rmse_in_image_metrics_and_fit_metrics():
     """Image metrics (validations: sphere, BTF, scene) and a fit's metrics: one key, the same
     value for the same numbers: sqrt(sum d^2 / sum ref^2) = 0.5 here by hand."""
-    from brdffit.fitting.objective import values_metrics
+    from brdffit.fitting.losses import values_metrics
     from brdffit.fitting.problem import prepare
     from brdffit.measurement import Measurement
     from brdffit.render.metrics import image_metrics

@@ -113,10 +113,10 @@ def test_loss_names():
 
 
 def test_fit_metrics_against_sums_written_out():
-    """``objective.values_metrics`` (every FitResult's metrics): rmse, log_rmse, rel_rmse,
+    """``losses.values_metrics`` (every FitResult's metrics): rmse, log_rmse, rel_rmse,
     mean_rel_error and max_abs_error over the used samples (sqrt_w > 0), equally weighted, and
     each loss as the sum of its squared residuals. Sample 2 is unused and far off: it must not count."""
-    from brdffit.fitting.objective import values_metrics
+    from brdffit.fitting.losses import values_metrics
     from brdffit.fitting.problem import Data
 
     f = np.array([[0.5, 3.0], [2.0, -0.2], [100.0, 100.0]])

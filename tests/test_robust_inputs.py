@@ -146,14 +146,14 @@ def test_the_log_loss_of_a_table_in_any_unit_is_the_plain_one(sample, solver):
     a mirror table's lambert fit minimised another loss than it reported). Every solver either reaches the
     plain loss's optimum (8 starts of lm) or says it did not converge: before, scipy stopped "converged" at
     x1e-12 at 1e7 times the optimum's loss and bfgs at 3 times."""
-    from brdffit.fitting import objective, problem
+    from brdffit.fitting import losses, problem
 
     for s in (1e-12, 1e12):
         m = brdffit.Measurement(sample.wi, sample.wo, np.asarray(sample.values) * s, grid="ubo81", name=f"x{s:g}")
         best = brdffit.fit(m, "ggx", multistart=7)
         r = brdffit.fit(m, "ggx", solver=solver)
         assert "data_unit" not in r.options
-        plain = objective.evaluate(r.model, r.params, problem.prepare(m).data)["log"]
+        plain = losses.evaluate(r.model, r.params, problem.prepare(m).data)["log"]
         assert r.loss_value == pytest.approx(plain, rel=1e-9)
         assert not r.converged or r.loss_value <= best.loss_value * (1 + 1e-6), (s, r.loss_value / best.loss_value)
         if solver in ("lm", "scipy"):  # the default and the reference reach it; optimistix's stock solvers may

@@ -15,7 +15,7 @@ import brdffit
 from brdffit import models
 from brdffit.errors import UsageError
 from brdffit.fitting import fit, select
-from brdffit.fitting.objective import evaluate
+from brdffit.fitting.losses import evaluate
 from brdffit.fitting.problem import prepare
 from brdffit.grid import spherical_to_cartesian
 

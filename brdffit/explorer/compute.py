@@ -4,7 +4,7 @@ slices and the sphere, and the numbers of the fit's loss on the table.
 The model runs through the one evaluator (``brdffit.fitting.model_eval.eval_model``: a program
 compiled once per model and length, kept on disk), in one call for the table's 6,561 pairs, the
 slices' 718 and the preview sphere's lit pixels together. The loss, ``rel_rmse`` and ``log_rmse``
-are the fit's own definitions (``brdffit.fitting.objective.values_metrics`` on the fit's prepared
+are the fit's own definitions (``brdffit.fitting.losses.values_metrics`` on the fit's prepared
 data, in the table's unit), compiled once per loss: the loss shown for a fit's parameters is that
 fit's ``loss_value``.
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 from ..fitting.cache import compiled
 from ..fitting.model_eval import eval_model
-from ..fitting.objective import values_metrics
+from ..fitting.losses import values_metrics
 from ..fitting.problem import Prepared, prepare
 from ..measurement import Measurement
 from ..models.base import Model

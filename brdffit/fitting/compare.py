@@ -15,7 +15,7 @@ from ..measurement import Measurement
 from .._progress import progress_bar
 from .api import fit
 from .losses import LOSSES, check_loss
-from .objective import evaluate
+from .losses import evaluate
 from .problem import prepare
 from .result import FitResult
 from .stages import check_solver

@@ -176,8 +176,7 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
 
 
 def _key(stage: str, objective, *options) -> tuple:
-    """A compiled stage's key (``cache.compiled``): the stage, the model and loss it evaluates (and the precision
-    of its Jacobian), its options."""
+    """A compiled stage's key (``cache.compiled``): the stage, the model, loss and Jacobian it reads, its options."""
     return (stage, objective.model, objective.loss, objective.jacobian, *options)
 
 

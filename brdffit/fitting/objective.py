@@ -1,7 +1,7 @@
 """The fit's objective: everything a solver evaluates of a model against the data (``problem.Data``).
 
-- the residual (``flat_residual``: the loss's per-sample residuals at a flat parameter vector), the
-  loss values and metrics of model values (``values_metrics``: every FitResult's metrics);
+- the residual (``flat_residual``: the loss's per-sample residuals at a flat parameter vector; the
+  values of every loss and the metrics of model values are the losses' own, ``losses.values_metrics``);
 - the constants a fit computes once (``fit_constants``: g(f_ref), the direction-only terms, the loss
   of an exact fit) and its loss by the step's route (``model_loss``, ``model_values``);
 - the normal equations of one solver step (``normal_equations``), computed with the structure every
@@ -209,7 +209,7 @@ def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
     return structured
 
 
-# -- the residual, the loss values and metrics, the constants of a fit ---------------------------------
+# -- the residual and the constants of a fit ---------------------------------------------------------
 
 def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
     wi, wo, ref, sqrt_w, cos_i, floor = data
@@ -225,46 +225,6 @@ def flat_residual(model: Model, loss: str):
         return residual_of_params(model, loss, model.unflatten(v), data)
 
     return fn
-
-
-@functools.lru_cache(maxsize=None)
-def loss_values_fn(model: Model):
-    """Compiled: flat params, data -> every loss's value (sum of squared normalised residuals)."""
-    return jax.jit(loss_values(model))
-
-
-@functools.lru_cache(maxsize=None)
-def loss_values(model: Model):
-    """flat params, data -> every loss's value and the metrics (jit-able)."""
-
-    def fn(v, data, losses=L.LOSSES):
-        wi, wo = data[0], data[1]
-        return values_metrics(model.eval(model.unflatten(v), wi, wo), data, losses)
-
-    return fn
-
-
-def values_metrics(f, data: Data, losses=L.LOSSES) -> dict:
-    """The value of each loss in ``losses`` and the metrics of model values f (N, C) against the
-    data (jit-able). A fit reports its own loss only: the cube root of the ``cbrt`` loss alone
-    cost more than a solver step (XLA's ``pow`` on 2 x 19,683 values, ~1 ms on UBO-81)."""
-    wi, wo, ref, sqrt_w, cos_i, floor = data
-    out = {name: jnp.sum(L.residual(name, f, ref, cos_i, sqrt_w, floor) ** 2) for name in losses}
-    # Metrics on f itself, over used samples (sqrt_w > 0), equally weighted.
-    used = (sqrt_w > 0).astype(f.dtype)
-    n = jnp.sum(used) * f.shape[1]
-    d = (f - ref) * used
-    out["rmse"] = jnp.sqrt(jnp.sum(d**2) / n)
-    out["log_rmse"] = L.log_rmse(f, ref, cos_i, used)
-    out["rel_rmse"] = jnp.sqrt(jnp.sum(d**2) / jnp.maximum(jnp.sum((ref * used) ** 2), 1e-300))
-    out["mean_rel_error"] = jnp.sum(jnp.abs(d) / (jnp.abs(ref) + floor)) / n
-    out["max_abs_error"] = jnp.max(jnp.abs(d))
-    return out
-
-
-def evaluate(model: Model, params, data: Data) -> dict[str, float]:
-    v = model.flatten(params)
-    return {k: float(x) for k, x in loss_values_fn(model)(v, data).items()}
 
 
 class FitConstants(NamedTuple):

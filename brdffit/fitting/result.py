@@ -78,7 +78,7 @@ class FitResult:
     loss_value: float
     #: The fit's loss (under its name, evaluated afresh at the result), "rmse", "log_rmse",
     #: "rel_rmse", "mean_rel_error", "max_abs_error" (over the used samples, equally weighted).
-    #: Other losses' values: ``brdffit.fitting.objective.evaluate`` (what ``compare`` reports). A
+    #: Other losses' values: ``brdffit.fitting.losses.evaluate`` (what ``compare`` reports). A
     #: converted fit's (``convert``) are against the source fit's BRDF, not against data.
     metrics: dict[str, float]
     steps: int

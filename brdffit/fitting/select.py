@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 from ..errors import UsageError
 from ..measurement import Measurement
-from .objective import evaluate
+from .losses import evaluate
 from .problem import prepare
 from .result import FitResult
 

@@ -32,7 +32,8 @@ import jax.numpy as jnp
 from .._fit_defaults import SOLVERS
 from ..errors import UsageError
 from . import init as _init
-from .objective import Objective, values_metrics
+from .losses import values_metrics
+from .objective import Objective
 from .problem import Data
 
 
