@@ -114,3 +114,15 @@ def test_of_several_given_starts_the_one_that_fits_the_data_best_starts_a_fit(mo
     assert ranked == [[0]]  # the rough table's three equal candidates are not ranked
     np.testing.assert_array_equal(res.start, np.stack([a, b]))
     assert (res.code == 0).all() and res.steps.max() <= 3
+
+
+def test_fit_btf_takes_either_jacobian_precision_and_refuses_another(small_btf):
+    """fit_btf's texels take a float32 Jacobian by default (its loss float64's), ``jacobian="float64"`` keeps
+    fit's: the maps' losses agree within 1e-6 relative; an unknown precision is one clear line."""
+    import numpy as np
+
+    low = brdffit.fit_btf(small_btf, "lambert", progress=False)
+    exact = brdffit.fit_btf(small_btf, "lambert", progress=False, jacobian="float64")
+    np.testing.assert_allclose(low.loss, exact.loss, rtol=1e-6)
+    with pytest.raises(brdffit.UsageError, match="jacobian must be one of float64, float32, not 'float16'"):
+        brdffit.fit_btf(small_btf, "lambert", progress=False, jacobian="float16")
