@@ -157,12 +157,13 @@ def _float32_jacobian_error(mdl):
     per-fit terms as a solver passes them: (the loss's error, J^T r's, J^T J's; relative to each one's largest
     entry), and the float64 values the step's route gives beside model.eval's."""
     from brdffit.fitting.losses import reference_transform
-    from brdffit.fitting.objective import model_values, precompute_geometry
+    from brdffit.fitting.objective import MixedTerms, model_values, precompute_geometry
 
     prep = _data(seed=4)
     wi, wo, ref, sqrt_w, cos_i, floor = prep.data
     v = jnp.asarray(np.asarray(mdl.flatten(mdl.sample(jax.random.PRNGKey(4), margin=0.05))))
     geometry = jax.jit(lambda d: precompute_geometry(mdl, d, "float32"))(prep.data)
+    assert isinstance(geometry, MixedTerms)
     exact, low = geometry
     assert all(a.dtype == jnp.float32 for a in jax.tree_util.tree_leaves(low) if jnp.issubdtype(a.dtype, jnp.floating))
     got = jax.jit(lambda v, d, g, geo: normal_equations(mdl, "log", "float32")(v, d, g, geo))(
@@ -170,7 +171,7 @@ def _float32_jacobian_error(mdl):
     want = jax.jit(dense_normal_equations(mdl, "log"))(v, prep.data)
     assert all(np.asarray(a).dtype == np.float64 for a in got)
     errors = [np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(np.asarray(b))) for a, b in zip(got, want)]
-    values = np.asarray(jax.jit(model_values(mdl, "float32"))(v, prep.data, geometry))
+    values = np.asarray(jax.jit(model_values(mdl))(v, prep.data, geometry))
     return errors, values, np.asarray(mdl.eval(mdl.unflatten(v), wi, wo))
 
 

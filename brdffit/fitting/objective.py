@@ -125,7 +125,7 @@ def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
     (:func:`precompute_geometry`) are what a solver computes once per fit.
 
     ``jacobian="float32"`` (a :func:`separable` model; see ``JACOBIANS``): the Jacobian's rows, J^T J and
-    J^T r in float32, from the direction-only terms in float32 (``geometry`` is then the pair
+    J^T r in float32, from the direction-only terms in float32 (``geometry`` is then the :class:`MixedTerms`
     :func:`precompute_geometry` gives); the model's values, the residuals and the loss r.r stay in the
     data's precision, so a step is accepted or refused, and a fit stops, on the exact loss."""
     S = compression(model)
@@ -162,10 +162,9 @@ def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
         wi, wo = data[0], data[1]
         theta, lam = split(v)
         mixed = low != v.dtype
-        if geometry is not None and mixed:  # the basis from the exact terms, its partials from the low ones
-            exact, terms = geometry
-            F = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, exact)[0]
-            dF = geometry_split(model, wi.shape[0], str(low)).finish(theta.astype(low), terms)[1]
+        if isinstance(geometry, MixedTerms):  # the basis from the exact terms, its partials from the low ones
+            F = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry.exact)[0]
+            dF = geometry_split(model, wi.shape[0], str(low)).finish(theta.astype(low), geometry.low)[1]
         elif geometry is not None:
             F, dF = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)
         else:
@@ -254,10 +253,10 @@ def fit_constants(model: Model, loss: str, data: Data, geometry=None, jacobian: 
     return FitConstants(None if g_t is None else g_t.T, geometry, 1e-26 * jnp.sum(r0 * r0))
 
 
-def model_loss(model: Model, loss: str, jacobian: str = "float64"):
+def model_loss(model: Model, loss: str):
     """loss_of(v, data, consts): the fit's loss at v, the model's values by the step's route
     (:func:`model_values`: model.eval costs ~10x more on ggx/UBO-81)."""
-    values = model_values(model, jacobian)
+    values = model_values(model)
 
     def loss_of(v, data, consts):
         wi, wo, ref, sqrt_w, cos_i, floor = data
@@ -333,6 +332,14 @@ class GeometrySplit:
         return jax.tree_util.tree_unflatten(self.out_tree, out)
 
 
+class MixedTerms(NamedTuple):
+    """The direction-only terms of a fit whose Jacobian is in a lower precision than its data
+    (:func:`precompute_geometry`): the values read ``exact``, the Jacobian's partials ``low``."""
+
+    exact: tuple
+    low: tuple
+
+
 @functools.lru_cache(maxsize=32)
 def geometry_split(model: Model, n: int, dtype: str) -> GeometrySplit:
     return GeometrySplit(model, n, dtype)
@@ -341,8 +348,8 @@ def geometry_split(model: Model, n: int, dtype: str) -> GeometrySplit:
 def precompute_geometry(model: Model, data: Data, jacobian: str = "float64"):
     """The direction-only part of a separable model's step (see :class:`GeometrySplit`), or None
     (a model of the other route, or one whose formula JAX cannot split). With a ``jacobian`` precision
-    below the data's: the pair (the terms, the terms in that precision) that :func:`normal_equations`
-    reads (the partials' share computed from the low ones)."""
+    below the data's: :class:`MixedTerms`, the terms and the terms in that precision (from which
+    :func:`normal_equations` computes the partials)."""
     if not separable(model):
         return None
     wi, wo = data[0], data[1]
@@ -353,11 +360,11 @@ def precompute_geometry(model: Model, data: Data, jacobian: str = "float64"):
     low = jnp.dtype(jacobian)
     if low == wi.dtype:
         return terms
-    return terms, tuple(a.astype(low) if jnp.issubdtype(a.dtype, jnp.floating) else a for a in terms)
+    return MixedTerms(terms, tuple(a.astype(low) if jnp.issubdtype(a.dtype, jnp.floating) else a for a in terms))
 
 
 @functools.lru_cache(maxsize=None)
-def model_values(model: Model, jacobian: str = "float64"):
+def model_values(model: Model):
     """(v (P,), data, geometry=None) -> f (N, C): the model's values, by the step's route when the
     model is :func:`separable` and ``geometry`` (:func:`precompute_geometry`) is given
     (f = B_0 + B lambda from the direction-only terms: ~0.1 ms on ggx/UBO-81, where
@@ -370,8 +377,8 @@ def model_values(model: Model, jacobian: str = "float64"):
         if geometry is None or not separable(model):
             return model.eval(model.unflatten(v), wi, wo)
         theta, lam = split(v)
-        if jnp.dtype(jacobian) != wi.dtype:
-            geometry = geometry[0]  # (the exact terms, the Jacobian's): precompute_geometry
+        if isinstance(geometry, MixedTerms):
+            geometry = geometry.exact
         F, _ = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)  # partials: dead code
         return _from_basis(F, lam, n_lin)[0]
 
@@ -409,7 +416,7 @@ def objective_of(model: Model, loss: str, jacobian: str = "float64") -> Objectiv
     compiled programs are kept per objective."""
     jacobian = jacobian if separable(model) and model.float32_jacobian else "float64"
     return Objective(model, loss, jacobian, flat_residual(model, loss), normal_equations(model, loss, jacobian),
-                     model_values(model, jacobian), model_loss(model, loss, jacobian),
+                     model_values(model), model_loss(model, loss),
                      functools.partial(fit_constants, model, loss, jacobian=jacobian),
                      functools.partial(precompute_geometry, model, jacobian=jacobian))
 
