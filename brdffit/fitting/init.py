@@ -227,7 +227,7 @@ def vp_grid(model: Model, loss: str):
             return one_per_channel(point, data, lo, hi, free, anchor)
         wi, wo, ref, sqrt_w, cos_i, floor = data
         zero = jnp.zeros((len(el_flat),), dtype=ref.dtype)
-        f0 = model.eval(model.unflatten(flat_of(point, zero)), wi, wo)
+        f0 = model.flat.f_r(flat_of(point, zero), wi, wo)
         if not lin:
             x, f = zero, f0
         else:
@@ -235,7 +235,7 @@ def vp_grid(model: Model, loss: str):
             for i, p in enumerate(lin):
                 ones = jnp.zeros((len(el_flat),), dtype=ref.dtype)
                 ones = ones.at[np.asarray([j for j, e in enumerate(elements) if e[0] == i])].set(1.0)
-                g = model.eval(model.unflatten(flat_of(point, ones)), wi, wo) - f0
+                g = model.flat.f_r(flat_of(point, ones), wi, wo) - f0
                 for e in elements:
                     if e[0] == i:
                         cols.append(g if e[1] < 0 else g * (jnp.arange(C) == e[1]))
@@ -338,7 +338,7 @@ def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str,
 
     m = space.model
     v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
-    slices = dict(m.slices())
+    slices = dict(m.flat.slices)
     linear = {p.name: p.linear for p in m.params}
     out = {}
     for lobe in m.lobes:
@@ -379,7 +379,7 @@ def reseed_grids(space, v: np.ndarray, lobe: tuple[str, ...]) -> np.ndarray:
     them); the linear parameters are solved again at each point."""
     m = space.model
     v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
-    slices = dict(m.slices())
+    slices = dict(m.flat.slices)
     nonlin = [p for p in m.params if not p.linear]
     base = np.stack([v[:, slices[p.name]].mean(axis=1) for p in nonlin], axis=1) if nonlin else np.zeros((len(v), 0))
     cols, axes = [], []

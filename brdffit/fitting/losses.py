@@ -176,7 +176,7 @@ def loss_values(model):
 
     def fn(v, data, losses=LOSSES):
         wi, wo = data[0], data[1]
-        return values_metrics(model.eval(model.unflatten(v), wi, wo), data, losses)
+        return values_metrics(model.flat.f_r(v, wi, wo), data, losses)
 
     return fn
 

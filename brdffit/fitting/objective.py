@@ -210,18 +210,14 @@ def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
 
 # -- the residual and the constants of a fit ---------------------------------------------------------
 
-def residual_of_params(model: Model, loss: str, params, data: Data) -> Float[Array, " M"]:
-    wi, wo, ref, sqrt_w, cos_i, floor = data
-    f = model.eval(params, wi, wo)
-    return L.residual(loss, f, ref, cos_i, sqrt_w, floor).reshape(-1)
-
-
 @functools.lru_cache(maxsize=None)
 def flat_residual(model: Model, loss: str):
     """r(v, data) with v the flat vector of parameter values (bounded; scipy's view)."""
+    f_r = model.flat.f_r
 
-    def fn(v, data):
-        return residual_of_params(model, loss, model.unflatten(v), data)
+    def fn(v, data: Data) -> Float[Array, " M"]:
+        wi, wo, ref, sqrt_w, cos_i, floor = data
+        return L.residual(loss, f_r(v, wi, wo), ref, cos_i, sqrt_w, floor).reshape(-1)
 
     return fn
 
@@ -375,7 +371,7 @@ def model_values(model: Model):
     def values(v, data: Data, geometry=None):
         wi, wo = data[0], data[1]
         if geometry is None or not separable(model):
-            return model.eval(model.unflatten(v), wi, wo)
+            return model.flat.f_r(v, wi, wo)
         theta, lam = split(v)
         if isinstance(geometry, MixedTerms):
             geometry = geometry.exact

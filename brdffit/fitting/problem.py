@@ -268,13 +268,12 @@ def homogeneous(model: Model) -> bool:
     so that a table scaled by s is fitted by the same model with them scaled by s."""
     if not any(p.linear for p in model.params):
         return False
-    zero = {p.name: (np.zeros(model.size(p)) if p.linear else np.asarray(v, np.float64))
-            for p, v in zip(model.params, model.unflatten(model.default_vector()).values())}
+    zero = np.where(model.flat.linear, 0.0, model.flat.defaults)
     rng = np.random.default_rng(0)
     d = rng.normal(size=(2, 64, 3))
     d[..., 2] = np.abs(d[..., 2]) + 0.1
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    return bool(np.all(np.asarray(model.eval(zero, d[0], d[1])) == 0.0))
+    return bool(np.all(np.asarray(model.flat.f_r(zero, d[0], d[1])) == 0.0))
 
 
 def data_unit(model: Model, loss: str, data: Data) -> float:

@@ -94,12 +94,12 @@ class ParameterSpace:
                 raise UsageError(
                     f"{what}: model {model.name!r} has no parameter {unknown[0]!r}; it has {', '.join(model.param_names)}"
                 )
-        lo_decl, hi_decl = model.bounds()
-        lo, hi = model.bounds(physical=bool(physical))
-        lo, hi = lo.copy(), hi.copy()
+        flat = model.flat
+        lo_decl, hi_decl = flat.bounds()
+        lo, hi = (a.copy() for a in flat.bounds(bool(physical)))
         free = np.ones(lo.shape, bool)
         values = np.full(lo.shape, np.nan)
-        slices = dict(model.slices())
+        slices = dict(flat.slices)
         for name, box in bounds.items():
             s = slices[name]
             if isinstance(box, str) or not hasattr(box, "__len__") or len(box) != 2:
@@ -127,13 +127,11 @@ class ParameterSpace:
                 raise UsageError(f"fixed value for {name!r}: {value!r} outside its bounds [{a[0]:g}, {b[0]:g}]")
             lo[s] = hi[s] = values[s] = v
             free[s] = False
-        linear = np.concatenate([np.full(model.size(p), p.linear) for p in model.params])
-        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds), None, linear)
-        return dataclasses.replace(space, order=space._interchangeable_groups(),
-                                   anchor=space.clip(model.default_vector()))
+        space = cls(model, lo, hi, free, values, (), bool(physical), frozenset(bounds), None, flat.linear)
+        return dataclasses.replace(space, order=space._interchangeable_groups(), anchor=space.clip(flat.defaults))
 
     def _interchangeable_groups(self) -> tuple[tuple[Lobe, ...], ...]:
-        slices = dict(self.model.slices())
+        slices = dict(self.model.flat.slices)
         by_kind: dict[str, list[Lobe]] = {}
         for lobe in self.model.lobes:
             by_kind.setdefault(lobe.kind, []).append(lobe)
@@ -218,7 +216,7 @@ class ParameterSpace:
         perm = np.arange(v.shape[0])
         if not self.order:
             return perm
-        slices = dict(self.model.slices())
+        slices = dict(self.model.flat.slices)
         params = {name: v[s] for name, s in slices.items()}
         source_perm = perm.copy()
         for group in self.order:
@@ -244,14 +242,14 @@ class ParameterSpace:
         v = np.asarray(v, dtype=np.float64)
         span = _span(self.model, self.lo, self.hi)
         if data_scale is not None and data_scale > 0 and np.isfinite(data_scale):
-            for p, (name, sl) in zip(self.model.params, self.model.slices()):
+            for p, (name, sl) in zip(self.model.params, self.model.flat.slices):
                 if p.linear and not (np.isfinite(self.lo[sl]).all() and np.isfinite(self.hi[sl]).all()):
                     span[sl] = span[sl] * data_scale
         tol = AT_BOUND_RTOL * span
         on_lo = self.free & np.isfinite(self.lo) & (v <= self.lo + tol)
         on_hi = self.free & np.isfinite(self.hi) & (v >= self.hi - tol) & ~on_lo
         out = {}
-        for name, s in self.model.slices():
+        for name, s in self.model.flat.slices:
             lo_c, hi_c = np.flatnonzero(on_lo[s]), np.flatnonzero(on_hi[s])
             n = s.stop - s.start
             parts = []
@@ -276,7 +274,7 @@ class ParameterSpace:
         return "the formula's limit"
 
     def describe_bound(self, name: str, side: str) -> float:
-        s = dict(self.model.slices())[name]
+        s = dict(self.model.flat.slices)[name]
         return float((self.lo if side == "lower" else self.hi)[s][0])
 
 
@@ -327,7 +325,7 @@ def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float]]:
     """(lobe, half width at half maximum in radians) for every lobe whose kind declares one."""
     from ..models import get
 
-    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in model.slices()}
+    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in model.flat.slices}
     out = []
     for lobe in model.lobes:
         try:
@@ -380,7 +378,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
                     f"at half maximum, samples {math.degrees(spacing):.3g} degrees apart): the samples see "
                     "little more than its peak, so its width and scale are poorly determined."
                 )
-    free_names = {name for name, s in space.model.slices() if space.free[s].any()}
+    free_names = {name for name, s in space.model.flat.slices if space.free[s].any()}
     for name in space.model.param_names:
         if name in free_names and name not in at_bound and name in stderr and stderr[name] is None:
             out.append(f"{name} is not determined by the data (it trades off against other parameters; no standard error).")

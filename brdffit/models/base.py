@@ -46,6 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .flat import FlatView, flat_view
+
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run
     from jaxtyping import Array, Float
 
@@ -222,6 +224,9 @@ class Model:
     #: ``sampling(p) -> tuple[Proposal, ...]``: the terms importance sampling draws from, with
     #: ``p(name)`` a parameter's value (float). None: cosine sampling (valid, not fast).
     sampling: Callable[[Callable[[str], float]], tuple[Proposal, ...]] | None = None
+    #: The table read once into the flat vector a solver moves, and the formula of that vector
+    #: (``brdffit.models.flat``): what the fitting core reads. No part of the model's identity.
+    flat: FlatView = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if self.lobes is None:
@@ -231,6 +236,7 @@ class Model:
         for lobe in self.lobes:
             if not set(lobe.params) <= known:
                 raise ValueError(f"model {self.name!r}: lobe {lobe} names unknown parameters")
+        object.__setattr__(self, "flat", flat_view(self))
 
     def __repr__(self) -> str:
         # short: the docstring and formula are in help(model) / model.doc, not in every repr
@@ -267,7 +273,7 @@ class Model:
 
     def default_vector(self) -> np.ndarray:
         """The defaults as a flat float64 NumPy vector (``flatten(defaults())`` without JAX)."""
-        return np.concatenate([np.full(self.size(p), p.default, dtype=np.float64) for p in self.params])
+        return self.flat.defaults.copy()
 
     def check_params(self, params: Params) -> dict[str, Array]:
         """Params as arrays of the declared sizes; raises ValueError naming what is wrong."""
@@ -332,11 +338,7 @@ class Model:
     # -- the flat vector ----------------------------------------------------------------------------
     def slices(self):
         """(parameter name, its slice of the flat vector), in the order of :meth:`flatten`."""
-        i = 0
-        for p in self.params:
-            n = self.size(p)
-            yield p.name, slice(i, i + n)
-            i += n
+        yield from self.flat.slices
 
     def flatten(self, params: Params) -> Float[Array, " P"]:
         """Params dict -> flat vector of parameter values (not transformed)."""
@@ -354,10 +356,8 @@ class Model:
     def bounds(self, physical: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Flat lower and upper bounds in the order of ``flatten`` (may be infinite), or the
         physical ranges (finite) with ``physical=True``."""
-        pick = (lambda p: p.physical) if physical else (lambda p: (p.lower, p.upper))
-        lo = np.concatenate([np.full(self.size(p), pick(p)[0], dtype=np.float64) for p in self.params])
-        hi = np.concatenate([np.full(self.size(p), pick(p)[1], dtype=np.float64) for p in self.params])
-        return lo, hi
+        lo, hi = self.flat.bounds(physical)
+        return lo.copy(), hi.copy()
 
     def sample(self, key: jax.Array, margin: float = 0.0) -> dict[str, Array]:
         """Random parameters inside ``Param.finite_range`` (the bounds, the physical range on a
