@@ -288,10 +288,10 @@ def test_a_fit_does_not_depend_on_the_size_of_the_program_it_ran_in():
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
     """seconds: compile and run of the grid start and of the finish plus those of each scipy solve (time
     shifted by known amounts here, so that the sums cannot hold by chance of zero compile times)."""
-    from brdffit.fitting import lanes, solver_scipy
+    from brdffit.fitting import solver_scipy, stages
 
     seen = {"start": [], "finish": [], "solve": []}
-    real_stage, real_solve = lanes.run_stage, solver_scipy.solve_scipy
+    real_stage, real_solve = stages.run_stage, solver_scipy.solve_scipy
 
     def run_stage(key, *a, **kw):
         out, c_s, r_s = real_stage(key, *a, **kw)
@@ -304,7 +304,7 @@ def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):
         seen["solve"].append((c_s + 10.0, r_s + 100.0))
         return (*out, c_s + 10.0, r_s + 100.0)
 
-    monkeypatch.setattr(lanes, "run_stage", run_stage)
+    monkeypatch.setattr(stages, "run_stage", run_stage)
     monkeypatch.setattr(solver_scipy, "solve_scipy", solve_scipy)
     r = fit(_measurement(n=200), "ggx", solver="scipy", multistart=2)
     assert len(seen["start"]) == 1 and len(seen["solve"]) == 3 and len(seen["finish"]) >= 1

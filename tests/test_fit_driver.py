@@ -85,7 +85,7 @@ def test_of_several_given_starts_the_one_that_fits_the_data_best_starts_a_fit(mo
     import numpy as np
 
     from brdffit.fitting import driver
-    from brdffit.fitting.lanes import Stages
+    from brdffit.fitting.stages import Stages
     from brdffit.fitting.options import FitOptions
     from brdffit.fitting.problem import prepare_values
     from brdffit.grid import ubo_pairs

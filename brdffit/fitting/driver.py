@@ -10,9 +10,9 @@ methods call, so it does not import that class). What
 
 1. starts: the variable-projection grid and any given starts, the best ``k`` of each fit
    (``stages.start_stage``), or the given starts alone;
-2. the solves, one lane per start, in rounds (``lanes.solve_rounds``; ``scipy``: in Python, one start after
+2. the solves, one lane per start, in rounds (``stages.solve_rounds``; ``scipy``: in Python, one start after
    another, ``solver_scipy.solve_lanes``); the best lane of each fit;
-3. lobes the data do not see (switched off, or a needle between the samples: ``init.unseen_lobes``) tried
+3. lobes the data do not see (switched off, or a needle between the samples: ``stages.unseen_lobes``) tried
    again at every roughness, scored on every sample; the fit keeps what lowers its loss;
 4. the finish (``stages.finish_stage``): the loss afresh where the solver's own is not exact, metrics and
    J^T J where FitResults are made;
@@ -37,7 +37,7 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
-from .lanes import Stages
+from .stages import Stages, unseen_lobes
 from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_in_unit, prepare, resolve_model, stack_data
 from .._fit_defaults import STATUS_TEXT
@@ -117,7 +117,7 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
 
     # Lobes the data do not see: tried again at every roughness (scored on every sample), kept where better.
     spacing = sample_spacing(np.asarray(data.wo if np.ndim(data.wo) == 2 else data.wo[fits[0]]))
-    for lobe, flagged in _init.unseen_lobes(space, v, spacing).items():
+    for lobe, flagged in unseen_lobes(space, v, spacing).items():
         which = np.flatnonzero(flagged)
         note(f"re-seeding the lobe of {lobe[0]}: the data do not see it")
         again = run.starts(fits[which], v[which][:, None, :], 1, grids=_init.reseed_grids(space, v[which], lobe),

@@ -298,70 +298,10 @@ def subset_rows(data: Data) -> np.ndarray:
     return np.arange(data[0].shape[-2]) if idx is None else idx
 
 
-def cached_grid(model: Model, lo, hi, free, anchor) -> np.ndarray:
-    """:func:`grid_for`, built once per model and space (read-only)."""
-    arrays = (np.asarray(lo, np.float64), np.asarray(hi, np.float64), np.asarray(free, bool),
-              np.asarray(anchor, np.float64))
-    return _cached_grid(model, *(a.tobytes() for a in arrays))
-
-
-@functools.lru_cache(maxsize=64)
-def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
-    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
-    pts = grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
-    pts.flags.writeable = False
-    return pts
-
-
 def take_rows(data: Data, idx) -> Data:
     """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
-
-
-# -- lobes the data do not see --------------------------------------------------------------------
-#: A lobe whose full width at half maximum is below this fraction of the sample spacing is a needle:
-#: at most the exact mirror samples see it (a scale and a roughness that only trade against each
-#: other there), so its shape is not fitted but left where the solve fell.
-NEEDLE_FRACTION = 0.1
-
-
-def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str, ...], np.ndarray]:
-    """lobe (``Model.lobes``: its parameter names) -> (n,) bool: the fits (rows of ``v`` (n, P)) whose lobe
-    the data do not see, among lobes with free nonlinear parameters: every scale (linear parameter) on its
-    lower bound 0 (the lobe is off, so its shape has no effect on the loss and a solver stopped there
-    never tried it: lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0), or a needle
-    (full width at half maximum below ``NEEDLE_FRACTION`` of the sample ``spacing``: a held-out yellow
-    paint's ggx fit ended at alpha 1.2e-4, ks 3.5e-5, where alpha 0.0148, ks 0.5 fits better and shows its
-    highlight)."""
-    from ..models import get
-
-    m = space.model
-    v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
-    slices = dict(m.flat.slices)
-    linear = {p.name: p.linear for p in m.params}
-    out = {}
-    for lobe in m.lobes:
-        scales = [slices[n] for n in lobe.params if linear[n]]
-        shapes = [slices[n] for n in lobe.params if not linear[n]]
-        if not scales or not any(space.free[s].any() for s in shapes):
-            continue
-        off = np.ones(len(v), bool)
-        for s in scales:
-            off &= np.all((v[:, s] <= space.lo[s]) & (space.lo[s] == 0.0), axis=1)
-        needle = np.zeros(len(v), bool)
-        try:
-            kind = get(lobe.kind)
-        except KeyError:
-            kind = None
-        if spacing is not None and kind is not None and kind.halfwidth is not None and kind.lobes:
-            names = kind.lobes[0].params
-            own = {name: v[:, slices[q].start] for name, q in zip(names, lobe.params)}
-            width = 2.0 * np.asarray(kind.halfwidth(own), np.float64)  # every fit at once (NumPy arrays)
-            needle = width < NEEDLE_FRACTION * spacing
-        if (off | needle).any():
-            out[tuple(lobe.params)] = off | needle
-    return out
 
 
 #: Most points of a re-seeding grid (:func:`reseed_grids`). It is scored on every sample, not on the start

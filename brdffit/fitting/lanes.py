@@ -1,42 +1,37 @@
-"""Running the fit stages (``stages``) over many lanes: chunks, devices, and the solver's rounds.
+"""Lanes: how the stages of a fit (``stages``) are laid out over many solves, on this process's devices.
 
-A *lane* is one solve (one start of one fit). The driver hands :func:`run_stage` the lanes' own
-arguments, the batch's data (``Data``: per-fit fields with one row per fit, shared fields without) and
-the fit each lane belongs to; here the lanes are cut into chunks of a few compiled sizes, each chunk's
-rows of the per-fit fields are gathered, and the chunks run on the process's devices. No Python runs
-per fit: per chunk only.
+A *lane* is one solve (one start of one fit). A compiled stage works on a chunk of lanes: each lane has
+its own row of the per-fit arrays (``Data`` fields with a leading axis: :func:`per_lane`) beside the
+arrays every lane shares (``Data`` fields without one: the directions of a BTF's texels, their weights),
+so a BTF's directions are held once, not once per texel. :func:`map_lanes` runs a stage's function of
+one lane over a chunk; :func:`shared_geometry` computes the direction-only terms once for a chunk whose
+lanes share their directions.
 
 How a backend is used (:func:`plan`, unless the caller sets ``chunk`` and ``lanes``):
 
 - CPU: chunks of ``CPU_CHUNK`` lanes, ``CPU_LANES`` of them vectorised at a time inside the compiled
-  call (one: a loop over the unbatched solve, ``stages.map_lanes``; a vectorised solve gains little on a
+  call (one: a loop over the unbatched solve, :func:`map_lanes`; a vectorised solve gains little on a
   CPU beyond sharing each operation's overhead, and its arrays must stay in the cache), as many chunks
   at once as the machine has cores (XLA runs a call without the GIL).
 - GPU (and other accelerators): one call holds up to ``DEVICE_CHUNK`` lanes, all vectorised; the
-  lane axis is split over the process's devices.
-
-The fit driver runs its stages through :class:`Stages` (one per call: the space, options, data and plan
-they share, the seconds they take).
-
-Solver rounds (:func:`solve_rounds`): a vectorised solve runs every lane until its slowest is done, so
-the solver runs at most ``ROUND_STEPS`` steps per call; between calls the lanes that are done leave
-and the others continue from their state (``solver_lm.Resume``) exactly where they were.
+  lane axis is split over the process's devices (:func:`place_lanes`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-import time
-from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .cache import compiled
-from .objective import objective_of
 from .problem import Data
-from .state import Rounds
+
+if TYPE_CHECKING:
+    from .objective import Objective
+
 
 #: Lanes per compiled call and lanes vectorised together on a CPU (see the module docstring). One lane at a
 #: time: vectorising is slower on 2 cores (a 64 x 64 ggx BTF, warm: 768-792 texels/s one lane at a time,
@@ -50,9 +45,6 @@ CPU_LANES = 1
 #: at 16,384 lanes (about 2 MB a lane), so a device with less memory gets fewer (``plan``).
 DEVICE_CHUNK = 16384
 DEVICE_BYTES_PER_LANE = 2 * 2**20
-#: Solver steps per round (see :func:`solve_rounds`), and the lanes below which the rest run in one call.
-ROUND_STEPS = 4
-ROUND_MIN_LANES = 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,11 +102,13 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _rows(a, idx):
-    return a[idx] if isinstance(a, np.ndarray) else jax.numpy.take(a, idx, axis=0)
+# -- a chunk's lanes ----------------------------------------------------------------------------------
+def gather_rows(a, idx):
+    """Rows ``idx`` of an array (NumPy stays NumPy: gathered on the host, not on the device)."""
+    return a[idx] if isinstance(a, np.ndarray) else jnp.take(a, idx, axis=0)
 
 
-def _place(tree, devices):
+def place_lanes(tree, devices):
     """The lane axis of every array split over ``devices`` (one device: as it is)."""
     if len(devices) == 1:
         return tree
@@ -124,172 +118,63 @@ def _place(tree, devices):
     return jax.device_put(tree, NamedSharding(mesh, PartitionSpec("lanes")))
 
 
-def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared: tuple, p: Plan, *,
-              on_chunk=None, note=None) -> tuple[dict, float, float]:
-    """``build()(lane_args, data, *shared)`` (a stage of ``stages``) for every lane: ``lane_args`` a pytree
-    of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
-    lane reads. Returns (the outputs as NumPy with the lane axis first, compile seconds, run seconds).
-    ``on_chunk(lanes)`` is called after each call; ``note(text)`` hears of a compile."""
-    from .stages import per_lane
-
-    fits = np.asarray(fits)
-    n = len(fits)
-    mask = per_lane(data)
-    leaves = jax.tree_util.tree_leaves(lane_args)
-    assert all(len(a) == n for a in leaves), "one row of lane_args per lane"
-    calls, start = [], 0
-    for count, size in p.sizes(n):
-        idx = np.arange(start, start + count)
-        calls.append((idx, np.concatenate([idx, np.full(size - count, idx[0])])))
-        start += count
-
-    def call_args(padded):
-        rows = fits[padded]
-        chunk_data = Data(*(_rows(a, rows) if m else a for a, m in zip(data, mask)))
-        lane = jax.tree_util.tree_map(lambda a: _rows(a, padded), lane_args)
-        placed = _place((lane, Data(*(a if m else None for a, m in zip(chunk_data, mask)))), p.devices)
-        return (placed[0], Data(*(b if m else a for a, b, m in zip(chunk_data, placed[1], mask))), *shared)
-
-    compile_s = 0.0
-    programs = {}
-    for _, padded in calls:  # compile (or load) each size once, before the calls run on threads
-        size = len(padded)
-        if size not in programs:
-            programs[size], c_s = compiled(key, build, *call_args(padded), note=note)
-            compile_s += c_s
-
-    def run(call):
-        idx, padded = call
-        out = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], programs[len(padded)](*call_args(padded)))
-        if on_chunk is not None:
-            on_chunk(len(idx))
-        return out
-
-    t0 = time.perf_counter()
-    if p.workers == 1 or len(calls) == 1:
-        outs = [run(c) for c in calls]
-    else:
-        with ThreadPoolExecutor(min(p.workers, len(calls))) as pool:
-            outs = list(pool.map(run, calls))
-    result = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
-    return result, compile_s, time.perf_counter() - t0
+#: Array ranks of one fit's ``Data`` fields; a field of one more rank holds one row per lane.
+_RANKS = Data(wi=2, wo=2, ref=2, sqrt_w=2, cos_i=2, floor=1)
 
 
-def _key(stage: str, objective, *options) -> tuple:
-    """A compiled stage's key (``cache.compiled``): the stage, the model, loss and Jacobian it reads, its options."""
-    return (stage, objective.model, objective.loss, objective.jacobian, *options)
+def per_lane(data: Data) -> Data:
+    """True for the fields that hold one row per lane (a leading axis), False for shared ones."""
+    return Data(*(jnp.ndim(a) == r + 1 for a, r in zip(data, _RANKS)))
 
 
-def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
-                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None, note=None) -> Rounds:
-    """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
-    at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
-    ``bounds``: (lo, hi, free). A stock optimistix solver runs all its steps in one round.
-    ``progress(fraction)``: called after each round with the share of the lanes that ended in it."""
-    from .stages import RESUMABLE, round_stage
-
-    n = len(v0)
-    v = np.array(v0, dtype=np.float64)
-    out = {"code": np.zeros(n, int), "steps": np.zeros(n, int)}
-    state = None
-    active = np.arange(n)
-    compile_s = run_s = 0.0
-    taken = 0
-    first = True
-    while len(active):
-        resumable = solver in RESUMABLE
-        # Rounds where lanes are vectorised (a lane alone runs its own steps and ends with them) and more
-        # than a few are left; else the rest of the steps in one call. The budget is a run-time argument:
-        # one compiled solve serves every round.
-        rounds = resumable and p.lanes > 1 and len(active) > ROUND_MIN_LANES
-        steps = min(ROUND_STEPS, max_steps - taken) if rounds else max_steps - taken
-        build_args = (objective, solver, rtol, atol, max_steps, first, p.lanes)
-        lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
-        res, c_s, r_s = run_stage(_key("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
-                                  fits[active], (*bounds, np.int32(steps)), p, note=note)
-        compile_s, run_s = compile_s + c_s, run_s + r_s
-        v_new, resume, done, code, took = res
-        if state is None:
-            state = jax.tree_util.tree_map(lambda a: np.zeros((n, *a.shape[1:]), a.dtype), resume)
-        for whole, part in zip(state, resume):
-            whole[active] = part
-        v[active] = v_new
-        out["steps"][active] += took
-        taken += steps
-        # A lane not done after its round's steps reports "maximum number of steps" (code 1): it goes
-        # on while the fit's own budget lasts; any other code ends it.
-        out["code"][active] = code
-        going = ~done & (code == 1) & (taken < max_steps)
-        first = False
-        ended = len(active) - (int(going.sum()) if resumable else 0)
-        active = active[going] if resumable else active[:0]
-        if progress is not None and ended:
-            progress(ended / n)
-    return Rounds(v, state.c, state.c0, state.H, out["code"], out["steps"], compile_s, run_s)
+def _split(data: Data):
+    lane = per_lane(data)
+    return (Data(*(a if m else None for a, m in zip(data, lane))),
+            Data(*(None if m else a for a, m in zip(data, lane))))
 
 
-class Stages:
-    """The stages of one call of the fit driver (``driver.solve``) run here: the space, the options, the data
-    and the plan they share, and the seconds they take (compile, run; the starts' also as "init").
-    :meth:`starts` (the start stage), :meth:`solve` (every lane's solve: the compiled solvers' rounds,
-    scipy's in Python) and :meth:`finish` (the finish stage)."""
+def _join(own: Data, shared: Data) -> Data:
+    return Data(*(a if a is not None else b for a, b in zip(own, shared)))
 
-    def __init__(self, space, options, data: Data, note, seconds: dict | None = None):
-        self.space, self.options, self.data, self.note = space, options, data, note
-        self.model = space.model
-        self.objective = objective_of(self.model, options.loss, options.jacobian)
-        self.plan = plan(options.chunk, options.lanes)
-        self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
-        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
-    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
-        self.seconds["compile"] += compile_s
-        self.seconds["run"] += run_s
-        if init:
-            self.seconds["init"] += compile_s + run_s
+def map_lanes(fn, lane_args, data: Data, lanes: int):
+    """``fn(lane_args_i, data_i)`` for every lane i (the leading axis of ``lane_args`` and of ``data``'s
+    per-lane fields), ``lanes`` of them vectorised at a time; shared fields are passed whole.
 
-    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None, grid: bool = True):
-        """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
-        each fit's own: ``grids`` (n, G, m); none without ``grid``) and the ``given`` (n, E, P), ranked on
-        ``subset``'s rows; fewer (at least one) where there are not k of them."""
-        from .init import cached_grid, subset_rows
-        from .stages import per_lane, start_stage
+    One lane at a time (a CPU's lanes) is a loop over the unbatched ``fn``: a vectorised batch of one gave
+    the same run time through a larger program (ggx's round stage lowered in 0.8-1.0 s and compiled in
+    4.4-4.6 s, against 0.54 s and 3.4 s). A lane's numbers must not depend on the program's size (a BTF's
+    maps must not depend on how its tiles were grouped), so the loop is one XLA cannot see through: its
+    trip count is hidden (a loop of one lane is otherwise unrolled into its surroundings), and a single
+    lane's arrays are doubled (an axis of length one is laid out otherwise); either changed the last bits
+    of a lane's result."""
+    own, shared = _split(data)
+    if lanes > 1:
+        return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
+    lanes_in = (lane_args, own)
+    n = jax.tree_util.tree_leaves(lanes_in)[0].shape[0]
+    if n == 1:
+        lanes_in = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, a]), lanes_in)
+    out = jax.eval_shape(lambda x: fn(x[0], _join(x[1], shared)), jax.tree_util.tree_map(lambda a: a[0], lanes_in))
 
-        lo, hi, free = self.bounds
-        if not grid:
-            points, lane_args = np.zeros((0, 1)), given
-        elif grids is None:
-            points = cached_grid(self.model, lo, hi, free, self.space.anchor)
-            lane_args = given
-        else:
-            points, lane_args = np.zeros((0, 0)), (grids, given)
-        k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
-        if subset is None:
-            subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
-        key = (self.objective, k, grid, self.plan.lanes)
-        out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
-                                  (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
-        self._count(c_s, r_s, init=True)
-        return out[0]
+    def one(i, acc):
+        x = jax.tree_util.tree_map(lambda a: a[i], lanes_in)
+        return jax.tree_util.tree_map(lambda o, v: o.at[i].set(v), acc, fn(x[0], _join(x[1], shared)))
 
-    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> Rounds:
-        o = self.options
-        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
-            from .solver_scipy import solve_lanes
+    empty = jax.tree_util.tree_map(lambda s: jnp.zeros((n, *s.shape), s.dtype), out)
+    return jax.lax.fori_loop(0, jax.lax.optimization_barrier(jnp.int32(n)), one, empty)
 
-            r = solve_lanes(self.objective, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
-                            max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
-        else:
-            r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                             self.bounds, self.plan, progress=progress, note=self.note)
-        self._count(r.compile_s, r.run_s)
-        return r
 
-    def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
-        from .stages import finish_stage
+def shared_geometry(objective: Objective, data: Data):
+    """The direction-only terms of a separable model (``objective.precompute_geometry``) when every lane
+    shares its directions (a BTF's texels): computed once per call, outside the lanes' loop; else None."""
+    lane = per_lane(data)
+    if lane.wi or lane.wo:
+        return None
+    return objective.geometry(in_solve_dtype(data))
 
-        key = (self.objective, metrics, jtj, self.plan.lanes)
-        out, c_s, r_s = run_stage(_key("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
-                                  note=self.note)
-        self._count(c_s, r_s)
-        return out
+
+def in_solve_dtype(data: Data) -> Data:
+    """The data in the solve's precision (a BTF's values arrive as float32, as stored)."""
+    dtype = data.wi.dtype
+    return data._replace(ref=data.ref.astype(dtype))

@@ -71,8 +71,8 @@ def solve_scipy(objective: Objective, v0, data, lo, hi, free, *, rtol, atol, max
 def solve_lanes(objective: Objective, v0: np.ndarray, data: Data, fits: np.ndarray, bounds: tuple, *, rtol: float,
                 atol: float, max_steps: int, jac: str, progress=None) -> Rounds:
     """:func:`solve_scipy` from each start ``v0`` (L, P) on row ``fits[i]`` of the per-fit fields, one after
-    another: the lanes of ``lanes.solve_rounds``, with no J^T J (NaN: the driver's finish computes it)."""
-    from .stages import per_lane
+    another: the lanes of ``stages.solve_rounds``, with no J^T J (NaN: the driver's finish computes it)."""
+    from .lanes import per_lane
 
     lo, hi, free = bounds
     lane = per_lane(data)

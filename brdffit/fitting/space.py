@@ -321,11 +321,14 @@ def _sample_spacing(wo_bytes: bytes, shape: tuple[int, ...], max_directions: int
     return float(np.median(np.arccos(cos.max(axis=1))))
 
 
-def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float]]:
-    """(lobe, half width at half maximum in radians) for every lobe whose kind declares one."""
+def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float | np.ndarray]]:
+    """(lobe, half width at half maximum in radians) for every lobe whose kind declares one: a float for a
+    flat vector ``v`` (P,), an array (n,) for rows (n, P) (every fit at once: the kinds' widths take arrays)."""
     from ..models import get
 
-    params = {name: np.asarray(v, dtype=np.float64)[s] for name, s in model.flat.slices}
+    v = np.asarray(v, dtype=np.float64)
+    rows = v.reshape(-1, v.shape[-1])
+    params = {name: rows[:, s.start] for name, s in model.flat.slices}  # a lobe's shape: one value per fit
     out = []
     for lobe in model.lobes:
         try:
@@ -334,8 +337,9 @@ def lobe_halfwidths(model: Model, v) -> list[tuple[Lobe, float]]:
             continue
         if base.halfwidth is None or not base.lobes:
             continue
-        own = dict(zip(base.lobes[0].params, (float(params[q][0]) for q in lobe.params)))
-        out.append((lobe, float(base.halfwidth(own))))
+        own = dict(zip(base.lobes[0].params, (params[q] for q in lobe.params)))
+        width = np.broadcast_to(np.asarray(base.halfwidth(own), np.float64), (len(rows),))
+        out.append((lobe, float(width[0]) if v.ndim == 1 else width))
     return out
 
 

@@ -1,40 +1,49 @@
-"""The compiled stages of every fit (docs/fitting.md#fitting): starts, solver rounds, the finish.
+"""The stages of every fit (docs/fitting.md#fitting): starts, solver rounds, the finish, and how they run.
 
-``fit``, ``fit_batch`` and ``fit_btf`` all run these programs (the fit driver, ``driver``, calls them
-through ``lanes``). Each program works on a *chunk of lanes*: a lane is one solve, with its own row of
-the per-fit arrays (``Data`` fields with a leading axis) beside the arrays every lane shares (``Data``
-fields without one: the directions of a BTF's texels, their weights). So a BTF's directions are held
-once, not once per texel, and one compiled program serves any number of fits of a shape.
+``fit``, ``fit_batch`` and ``fit_btf`` all run these programs: the fit driver (``driver``) runs them through
+:class:`Stages` (one per call: the space, options, data and plan they share, the seconds they take). Each
+program works on a chunk of lanes (``lanes``: a lane is one solve, with its own row of the per-fit arrays
+beside the arrays every lane shares), so one compiled program serves any number of fits of a shape.
 
 - :func:`start_stage`: the variable-projection grid (``init``) on a subset of the samples, and any
-  starts the caller gives, ranked by their loss there: the ``k`` best starts of each lane.
+  starts the caller gives, ranked by their loss there: the ``k`` best starts of each lane. The default
+  grid is built once per model and space (:func:`cached_grid`); a lobe the data do not see
+  (:func:`unseen_lobes`) is started again from a grid of its own (``init.reseed_grids``).
 - :func:`round_stage`: at most ``steps`` solver steps of each lane, from its start or from the
-  state the previous round left (``state.Resume``): the driver lets the lanes that are done
-  leave between rounds, so that a vectorised chunk does not run every lane until its slowest
-  converges. optimistix's stock solvers cannot resume: one round with every step.
+  state the previous round left (``state.Resume``). A vectorised solve runs every lane until its
+  slowest is done, so :func:`solve_rounds` runs at most ``ROUND_STEPS`` steps per call; between calls
+  the lanes that are done leave and the others continue exactly where they were. optimistix's stock
+  solvers cannot resume: one round with every step.
 - :func:`finish_stage`: the fit's loss afresh (the check of a solver's claim), and, for a result of
   ``fit`` / ``fit_batch``, every metric and J^T J (the standard errors' need).
 
-Inside a chunk ``lanes`` lanes are vectorised together (``jax.lax.map`` with that batch size): on a
-GPU the whole chunk, on a CPU a few (a vectorised solve gains little there; see ``lanes``).
-
-Compiled programs are kept per process and on disk (``cache.compiled``): a second process loads them
-without tracing, and without importing optimistix.
+:func:`run_stage` runs one stage for every lane: the lanes cut into chunks of a few compiled sizes
+(``lanes.Plan``), each chunk's rows of the per-fit fields gathered, the chunks run on the process's
+devices. No Python runs per fit: per chunk only. Compiled programs are kept per process and on disk
+(``cache.compiled``): a second process loads them without tracing, and without importing optimistix.
 """
 
 from __future__ import annotations
 
 import functools
+import time
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._fit_defaults import SOLVERS
 from ..errors import UsageError
+from ..models.base import Model
 from . import init as _init
+from .cache import compiled
+from .lanes import Plan, gather_rows, in_solve_dtype, map_lanes, per_lane, place_lanes, plan, shared_geometry
 from .losses import values_metrics
-from .objective import Objective
+from .objective import Objective, objective_of
 from .problem import Data
+from .space import lobe_halfwidths
+from .state import Rounds
 
 
 #: Solvers that run compiled (and vectorise): everything but scipy.
@@ -52,67 +61,10 @@ def check_solver(solver: str) -> str:
     return key
 
 
-# -- lanes and shared arrays ---------------------------------------------------------------------
-#: Array ranks of one fit's ``Data`` fields; a field of one more rank holds one row per lane.
-_RANKS = Data(wi=2, wo=2, ref=2, sqrt_w=2, cos_i=2, floor=1)
+#: Solver steps per round (see :func:`solve_rounds`), and the lanes below which the rest run in one call.
+ROUND_STEPS = 4
 
-
-def per_lane(data: Data) -> Data:
-    """True for the fields that hold one row per lane (a leading axis), False for shared ones."""
-    return Data(*(jnp.ndim(a) == r + 1 for a, r in zip(data, _RANKS)))
-
-
-def _split(data: Data):
-    lane = per_lane(data)
-    return (Data(*(a if m else None for a, m in zip(data, lane))),
-            Data(*(None if m else a for a, m in zip(data, lane))))
-
-
-def _join(own: Data, shared: Data) -> Data:
-    return Data(*(a if a is not None else b for a, b in zip(own, shared)))
-
-
-def map_lanes(fn, lane_args, data: Data, lanes: int):
-    """``fn(lane_args_i, data_i)`` for every lane i (the leading axis of ``lane_args`` and of ``data``'s
-    per-lane fields), ``lanes`` of them vectorised at a time; shared fields are passed whole.
-
-    One lane at a time (a CPU's lanes) is a loop over the unbatched ``fn``: a vectorised batch of one gave
-    the same run time through a larger program (ggx's round stage lowered in 0.8-1.0 s and compiled in
-    4.4-4.6 s, against 0.54 s and 3.4 s). A lane's numbers must not depend on the program's size (a BTF's
-    maps must not depend on how its tiles were grouped), so the loop is one XLA cannot see through: its
-    trip count is hidden (a loop of one lane is otherwise unrolled into its surroundings), and a single
-    lane's arrays are doubled (an axis of length one is laid out otherwise); either changed the last bits
-    of a lane's result."""
-    own, shared = _split(data)
-    if lanes > 1:
-        return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
-    lanes_in = (lane_args, own)
-    n = jax.tree_util.tree_leaves(lanes_in)[0].shape[0]
-    if n == 1:
-        lanes_in = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, a]), lanes_in)
-    out = jax.eval_shape(lambda x: fn(x[0], _join(x[1], shared)), jax.tree_util.tree_map(lambda a: a[0], lanes_in))
-
-    def one(i, acc):
-        x = jax.tree_util.tree_map(lambda a: a[i], lanes_in)
-        return jax.tree_util.tree_map(lambda o, v: o.at[i].set(v), acc, fn(x[0], _join(x[1], shared)))
-
-    empty = jax.tree_util.tree_map(lambda s: jnp.zeros((n, *s.shape), s.dtype), out)
-    return jax.lax.fori_loop(0, jax.lax.optimization_barrier(jnp.int32(n)), one, empty)
-
-
-def shared_geometry(objective: Objective, data: Data):
-    """The direction-only terms of a separable model (``objective.precompute_geometry``) when every lane
-    shares its directions (a BTF's texels): computed once per call, outside the lanes' loop; else None."""
-    lane = per_lane(data)
-    if lane.wi or lane.wo:
-        return None
-    return objective.geometry(_solve_dtype(data))
-
-
-def _solve_dtype(data: Data) -> Data:
-    """The data in the solve's precision (a BTF's values arrive as float32, as stored)."""
-    dtype = data.wi.dtype
-    return data._replace(ref=data.ref.astype(dtype))
+ROUND_MIN_LANES = 4
 
 
 # -- stages -----------------------------------------------------------------------------------------
@@ -127,7 +79,7 @@ def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
     residual = objective.residual
 
     def one(grid_points, given, data, lo, hi, free, anchor, subset):
-        sub = _init.take_rows(_solve_dtype(data), subset)
+        sub = _init.take_rows(in_solve_dtype(data), subset)
         given = jnp.where(free, jnp.clip(given, lo, hi), anchor)
 
         def subset_loss(v):
@@ -165,7 +117,7 @@ def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max
     solve = solve_one(objective, solver, rtol, atol, max_steps)
 
     def one(v, resume, data, lo, hi, free, steps, geometry):
-        data = _solve_dtype(data)
+        data = in_solve_dtype(data)
         consts = objective.constants(data, geometry)
         if solver in RESUMABLE:
             return solve(v, data, lo, hi, free, consts, resume, steps)
@@ -186,7 +138,7 @@ def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
     loss, ne = objective.loss, objective.normal_equations
 
     def one(v, data, geometry):
-        data = _solve_dtype(data)
+        data = in_solve_dtype(data)
         consts = objective.constants(data, geometry)
         values = values_metrics(objective.values(v, data, consts.geometry), data, (loss,))
         out = {"loss": values[loss], "floor": consts.loss_floor}
@@ -201,3 +153,217 @@ def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
         return map_lanes(lambda x, d: one(x, d, geometry), v, data, lanes)
 
     return run
+
+
+# -- running a stage over lanes ------------------------------------------------------------------------
+def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared: tuple, p: Plan, *,
+              on_chunk=None, note=None) -> tuple[dict, float, float]:
+    """``build()(lane_args, data, *shared)`` (a stage of ``stages``) for every lane: ``lane_args`` a pytree
+    of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
+    lane reads. Returns (the outputs as NumPy with the lane axis first, compile seconds, run seconds).
+    ``on_chunk(lanes)`` is called after each call; ``note(text)`` hears of a compile."""
+    fits = np.asarray(fits)
+    n = len(fits)
+    mask = per_lane(data)
+    leaves = jax.tree_util.tree_leaves(lane_args)
+    assert all(len(a) == n for a in leaves), "one row of lane_args per lane"
+    calls, start = [], 0
+    for count, size in p.sizes(n):
+        idx = np.arange(start, start + count)
+        calls.append((idx, np.concatenate([idx, np.full(size - count, idx[0])])))
+        start += count
+
+    def call_args(padded):
+        rows = fits[padded]
+        chunk_data = Data(*(gather_rows(a, rows) if m else a for a, m in zip(data, mask)))
+        lane = jax.tree_util.tree_map(lambda a: gather_rows(a, padded), lane_args)
+        placed = place_lanes((lane, Data(*(a if m else None for a, m in zip(chunk_data, mask)))), p.devices)
+        return (placed[0], Data(*(b if m else a for a, b, m in zip(chunk_data, placed[1], mask))), *shared)
+
+    compile_s = 0.0
+    programs = {}
+    for _, padded in calls:  # compile (or load) each size once, before the calls run on threads
+        size = len(padded)
+        if size not in programs:
+            programs[size], c_s = compiled(key, build, *call_args(padded), note=note)
+            compile_s += c_s
+
+    def run(call):
+        idx, padded = call
+        out = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], programs[len(padded)](*call_args(padded)))
+        if on_chunk is not None:
+            on_chunk(len(idx))
+        return out
+
+    t0 = time.perf_counter()
+    if p.workers == 1 or len(calls) == 1:
+        outs = [run(c) for c in calls]
+    else:
+        with ThreadPoolExecutor(min(p.workers, len(calls))) as pool:
+            outs = list(pool.map(run, calls))
+    result = jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
+    return result, compile_s, time.perf_counter() - t0
+
+
+def _key(stage: str, objective, *options) -> tuple:
+    """A compiled stage's key (``cache.compiled``): the stage, the model, loss and Jacobian it reads, its options."""
+    return (stage, objective.model, objective.loss, objective.jacobian, *options)
+
+
+def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
+                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None, note=None) -> Rounds:
+    """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
+    at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
+    ``bounds``: (lo, hi, free). A stock optimistix solver runs all its steps in one round.
+    ``progress(fraction)``: called after each round with the share of the lanes that ended in it."""
+    n = len(v0)
+    v = np.array(v0, dtype=np.float64)
+    out = {"code": np.zeros(n, int), "steps": np.zeros(n, int)}
+    state = None
+    active = np.arange(n)
+    compile_s = run_s = 0.0
+    taken = 0
+    first = True
+    while len(active):
+        resumable = solver in RESUMABLE
+        # Rounds where lanes are vectorised (a lane alone runs its own steps and ends with them) and more
+        # than a few are left; else the rest of the steps in one call. The budget is a run-time argument:
+        # one compiled solve serves every round.
+        rounds = resumable and p.lanes > 1 and len(active) > ROUND_MIN_LANES
+        steps = min(ROUND_STEPS, max_steps - taken) if rounds else max_steps - taken
+        build_args = (objective, solver, rtol, atol, max_steps, first, p.lanes)
+        lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
+        res, c_s, r_s = run_stage(_key("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
+                                  fits[active], (*bounds, np.int32(steps)), p, note=note)
+        compile_s, run_s = compile_s + c_s, run_s + r_s
+        v_new, resume, done, code, took = res
+        if state is None:
+            state = jax.tree_util.tree_map(lambda a: np.zeros((n, *a.shape[1:]), a.dtype), resume)
+        for whole, part in zip(state, resume):
+            whole[active] = part
+        v[active] = v_new
+        out["steps"][active] += took
+        taken += steps
+        # A lane not done after its round's steps reports "maximum number of steps" (code 1): it goes
+        # on while the fit's own budget lasts; any other code ends it.
+        out["code"][active] = code
+        going = ~done & (code == 1) & (taken < max_steps)
+        first = False
+        ended = len(active) - (int(going.sum()) if resumable else 0)
+        active = active[going] if resumable else active[:0]
+        if progress is not None and ended:
+            progress(ended / n)
+    return Rounds(v, state.c, state.c0, state.H, out["code"], out["steps"], compile_s, run_s)
+
+
+# -- starts -----------------------------------------------------------------------------------------------
+def cached_grid(model: Model, lo, hi, free, anchor) -> np.ndarray:
+    """``init.grid_for``, built once per model and space (read-only)."""
+    arrays = (np.asarray(lo, np.float64), np.asarray(hi, np.float64), np.asarray(free, bool),
+              np.asarray(anchor, np.float64))
+    return _cached_grid(model, *(a.tobytes() for a in arrays))
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
+    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
+    pts = _init.grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
+    pts.flags.writeable = False
+    return pts
+
+
+#: A lobe whose full width at half maximum is below this fraction of the sample spacing is a needle:
+#: at most the exact mirror samples see it (a scale and a roughness that only trade against each
+#: other there), so its shape is not fitted but left where the solve fell.
+NEEDLE_FRACTION = 0.1
+
+
+def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str, ...], np.ndarray]:
+    """lobe (``Model.lobes``: its parameter names) -> (n,) bool: the fits (rows of ``v`` (n, P)) whose lobe
+    the data do not see, among lobes with free nonlinear parameters: every scale (linear parameter) on its
+    lower bound 0 (the lobe is off, so its shape has no effect on the loss and a solver stopped there
+    never tried it: lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0), or a needle
+    (full width at half maximum below ``NEEDLE_FRACTION`` of the sample ``spacing``: a held-out yellow
+    paint's ggx fit ended at alpha 1.2e-4, ks 3.5e-5, where alpha 0.0148, ks 0.5 fits better and shows its
+    highlight)."""
+    m = space.model
+    v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
+    slices = dict(m.flat.slices)
+    linear = {p.name: p.linear for p in m.params}
+    widths = dict(lobe_halfwidths(m, v)) if spacing is not None else {}
+    out = {}
+    for lobe in m.lobes:
+        scales = [slices[n] for n in lobe.params if linear[n]]
+        shapes = [slices[n] for n in lobe.params if not linear[n]]
+        if not scales or not any(space.free[s].any() for s in shapes):
+            continue
+        off = np.ones(len(v), bool)
+        for s in scales:
+            off &= np.all((v[:, s] <= space.lo[s]) & (space.lo[s] == 0.0), axis=1)
+        # full width (twice the half width) against the spacing
+        needle = 2.0 * widths[lobe] < NEEDLE_FRACTION * spacing if lobe in widths else np.zeros(len(v), bool)
+        if (off | needle).any():
+            out[tuple(lobe.params)] = off | needle
+    return out
+
+
+class Stages:
+    """The stages of one call of the fit driver (``driver.solve``) run here: the space, the options, the data
+    and the plan they share, and the seconds they take (compile, run; the starts' also as "init").
+    :meth:`starts` (the start stage), :meth:`solve` (every lane's solve: the compiled solvers' rounds,
+    scipy's in Python) and :meth:`finish` (the finish stage)."""
+
+    def __init__(self, space, options, data: Data, note, seconds: dict | None = None):
+        self.space, self.options, self.data, self.note = space, options, data, note
+        self.model = space.model
+        self.objective = objective_of(self.model, options.loss, options.jacobian)
+        self.plan = plan(options.chunk, options.lanes)
+        self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
+        self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
+
+    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
+        self.seconds["compile"] += compile_s
+        self.seconds["run"] += run_s
+        if init:
+            self.seconds["init"] += compile_s + run_s
+
+    def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None, grid: bool = True):
+        """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
+        each fit's own: ``grids`` (n, G, m); none without ``grid``) and the ``given`` (n, E, P), ranked on
+        ``subset``'s rows; fewer (at least one) where there are not k of them."""
+        lo, hi, free = self.bounds
+        if not grid:
+            points, lane_args = np.zeros((0, 1)), given
+        elif grids is None:
+            points = cached_grid(self.model, lo, hi, free, self.space.anchor)
+            lane_args = given
+        else:
+            points, lane_args = np.zeros((0, 0)), (grids, given)
+        k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
+        if subset is None:
+            subset = _init.subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
+        key = (self.objective, k, grid, self.plan.lanes)
+        out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
+                                  (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
+        self._count(c_s, r_s, init=True)
+        return out[0]
+
+    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> Rounds:
+        o = self.options
+        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
+            from .solver_scipy import solve_lanes
+
+            r = solve_lanes(self.objective, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
+                            max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
+        else:
+            r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+                             self.bounds, self.plan, progress=progress, note=self.note)
+        self._count(r.compile_s, r.run_s)
+        return r
+
+    def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
+        key = (self.objective, metrics, jtj, self.plan.lanes)
+        out, c_s, r_s = run_stage(_key("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
+                                  note=self.note)
+        self._count(c_s, r_s)
+        return out

@@ -28,7 +28,7 @@ class Resume(NamedTuple):
 
 
 class Rounds(NamedTuple):
-    """Every lane's solve after ``lanes.solve_rounds`` (or ``solver_scipy.solve_lanes``) (NumPy, the lane axis first)."""
+    """Every lane's solve after ``stages.solve_rounds`` (or ``solver_scipy.solve_lanes``) (NumPy, the lane axis first)."""
 
     v: np.ndarray  # (L, P) the solution
     loss: np.ndarray  # (L,) the loss at v (the solver's route)
