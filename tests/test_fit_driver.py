@@ -126,3 +126,27 @@ def test_fit_btf_takes_either_jacobian_precision_and_refuses_another(small_btf):
     np.testing.assert_allclose(low.loss, exact.loss, rtol=1e-6)
     with pytest.raises(brdffit.UsageError, match="jacobian must be one of float64, float32, not 'float16'"):
         brdffit.fit_btf(small_btf, "lambert", progress=False, jacobian="float16")
+
+
+def test_a_btf_runs_record_names_the_precision_its_texels_jacobian_is_computed_in(small_btf):
+    """A resumed run must not mix tiles of two precisions: the record (``run.json``) names the one computed,
+    asked or by default, and the float64 of a model that does not declare float32 safe (lafortune,
+    ``Model.float32_jacobian``); a record that differs is another run's, refused without ``force``."""
+    from brdffit.btf.fit import tile_job
+
+    assert tile_job(small_btf, "lambert").record["jacobian"] == "float32"
+    assert tile_job(small_btf, "lambert", jacobian="float64").record["jacobian"] == "float64"
+    assert tile_job(small_btf, "lafortune").record["jacobian"] == "float64"
+    assert tile_job(small_btf, "lafortune", jacobian="float32").record["jacobian"] == "float64"
+
+
+def test_tiles_of_a_run_in_another_precision_are_another_runs(small_btf, tmp_path):
+    from brdffit.btf import run as btf_run
+    from brdffit.btf.fit import tile_job
+
+    default = tile_job(small_btf, "lambert").record
+    older = {k: v for k, v in default.items() if k != "jacobian"}  # a run of a version whose default was float64
+    btf_run.prepare(tmp_path / "tiles", older, force=False, main=True, barrier=lambda name: None)
+    btf_run.write_run(tmp_path / "tiles", older)
+    with pytest.raises(brdffit.UsageError, match="holds tiles of another run"):
+        btf_run.prepare(tmp_path / "tiles", default, force=False, main=True, barrier=lambda name: None)

@@ -67,11 +67,15 @@ def tile_job(btf: BTF, model, loss: str = "log", solver: str | None = None, neig
     """Check and resolve ``fit_btf``'s arguments once (see :func:`fit_btf`)."""
     if not isinstance(btf, BTF):
         raise UsageError(f"fit_btf needs a BTF from brdffit.load_btf, got {type(btf).__name__}")
+    from ..fitting.objective import jacobian_precision
+
     options, batch_options = fit_options(loss, solver, batch_options)
     mdl = resolve_model(model, btf.channels)
+    # The precision the texels' Jacobian is computed in, whether asked or by default: tiles of a run in the
+    # other one (or of a version whose default was float64) are another run's.
     record = {"btf": btf.signature(), "model": mdl.name, "loss": options.loss,
               "options": {k: str(v) for k, v in sorted(batch_options.items())}, "neighbours": bool(neighbours),
-              "tile": btf.tile, "shape": [btf.height, btf.width]}
+              "jacobian": jacobian_precision(mdl, options.jacobian), "tile": btf.tile, "shape": [btf.height, btf.width]}
     return TileJob(mdl, options, bool(neighbours), record)
 
 

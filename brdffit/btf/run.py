@@ -2,7 +2,7 @@
 the lock (docs/btf.md#resuming).
 
 - ``run.json`` identifies the run: the BTF's content signature, model, loss, solver options,
-  neighbour starts, tile edge and shape. A run that finds the same ``run.json`` fits only the tiles
+  neighbour starts, the precision of the texels' Jacobian, tile edge and shape. A run that finds the same ``run.json`` fits only the tiles
   without a file; another run's tiles are an error unless ``force`` (then they are removed).
 - ``tile_NNNNN.npz`` holds a finished tile's arrays (``param:<name>``, ``loss``, ``converged``,
   ``steps``), written atomically (a hidden temporary file renamed onto its name). The process that

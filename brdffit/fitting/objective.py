@@ -404,13 +404,18 @@ class Objective(NamedTuple):
 JACOBIANS = ("float64", "float32")
 
 
+def jacobian_precision(model: Model, jacobian: str) -> str:
+    """The precision a fit of ``model`` computes its Jacobian in when ``jacobian`` is asked (see :func:`objective_of`)."""
+    return jacobian if separable(model) and model.float32_jacobian else "float64"
+
+
 @functools.lru_cache(maxsize=None)
 def objective_of(model: Model, loss: str, jacobian: str = "float64") -> Objective:
     """The :class:`Objective` of ``model`` under ``loss``, its Jacobian in the precision ``jacobian`` where the
     model is :func:`separable` and declares its partials safe in float32 (``Model.float32_jacobian``; else
     float64: the other route's Jacobian is forward mode through the model), one per process: the stages'
     compiled programs are kept per objective."""
-    jacobian = jacobian if separable(model) and model.float32_jacobian else "float64"
+    jacobian = jacobian_precision(model, jacobian)
     return Objective(model, loss, jacobian, flat_residual(model, loss), normal_equations(model, loss, jacobian),
                      model_values(model), model_loss(model, loss),
                      functools.partial(fit_constants, model, loss, jacobian=jacobian),
