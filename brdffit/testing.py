@@ -84,8 +84,7 @@ def model_problems(model: str | Model, dtype="float64", param_sets=None, pairs=N
     sets = param_sets if param_sets is not None else stress_parameter_sets(model)
     flat = jnp.asarray(np.stack([np.asarray(model.flatten(s)) for s in sets]), dtype)
 
-    def f(x, a, b):
-        return model.eval(model.unflatten(x), a, b)
+    f = model.flat.f_r  # (x, wi, wo) -> (N, C): the formula as a fit evaluates it
 
     def checks(x):
         val = f(x, wi, wo)
@@ -119,10 +118,10 @@ def _structure_problems(model: Model, x: np.ndarray, wi, wo) -> list[str]:
     x = jnp.asarray(x)
 
     def f(v):
-        return model.eval(model.unflatten(v), wi, wo)
+        return model.flat.f_r(v, wi, wo)
 
     jac = np.asarray(jax.jacfwd(f)(x))  # (N, C, P)
-    out, i, C = [], 0, model.channels
+    out, i = [], 0
     lin = np.zeros(model.n_free, bool)
     for p in model.params:
         n = model.size(p)

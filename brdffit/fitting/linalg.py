@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import jax
 import jax.numpy as jnp
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's import (~45 ms) is not needed to run

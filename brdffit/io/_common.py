@@ -8,12 +8,16 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import UsageError
 from ..grid import ubo_pairs
 from ..measurement import Measurement
+
+if TYPE_CHECKING:  # the annotation only: readers import jax where they copy
+    import jax
 
 
 def query_directions(wi=None, wo=None) -> tuple[np.ndarray, np.ndarray, str | None]:

@@ -346,12 +346,8 @@ class Model:
         return jnp.concatenate([params[p.name] for p in self.params])
 
     def unflatten(self, v: Float[Array, " P"]) -> dict[str, Array]:
-        out, i = {}, 0
-        for p in self.params:
-            n = self.size(p)
-            out[p.name] = v[i : i + n]
-            i += n
-        return out
+        """The params dict of the flat vector ``v`` (views of it, in the layout of :attr:`flat`)."""
+        return {name: v[s] for name, s in self.flat.slices}
 
     def bounds(self, physical: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Flat lower and upper bounds in the order of ``flatten`` (may be infinite), or the
