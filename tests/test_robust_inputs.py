@@ -180,7 +180,7 @@ def test_unseen_lobes_are_found_and_reseeded():
     """The detection and the re-seeding grid on their own: a lobe whose every scale is 0 is off (not one with
     a channel on, not the lambert term, which has no shape to try); a needle lobe (full width below a tenth
     of the samples' spacing) is not seen either; one re-seeding grid per fit."""
-    from brdffit.fitting import init, stages
+    from brdffit.fitting import init
     from brdffit.fitting.space import parameter_space
 
     space = parameter_space(brdffit.models.get("lambert+ggx+ggx"))
@@ -189,9 +189,9 @@ def test_unseen_lobes_are_found_and_reseeded():
     needle = {**p, "ggx1.ks": [0.5] * 3, "ggx1.alpha": 1.2e-4}
     v = np.stack([np.asarray(space.model.flatten(space.model.check_params(q))) for q in (p, needle)])
     lobe = ("ggx1.ks", "ggx1.alpha", "ggx1.f0")
-    found = stages.unseen_lobes(space, v, np.radians(14.5))
+    found = space.unseen_lobes(v, np.radians(14.5))
     assert list(found) == [lobe] and found[lobe].tolist() == [True, True]
-    assert stages.unseen_lobes(space, v, None)[lobe].tolist() == [True, False]  # a needle needs a spacing
+    assert space.unseen_lobes(v, None)[lobe].tolist() == [True, False]  # a needle needs a spacing
     grids = init.reseed_grids(space, v, lobe)  # columns: ggx1.alpha, ggx1.f0, ggx2.alpha, ggx2.f0
     assert grids.shape == (2, init.POINTS_ROUGHNESS * init.POINTS_OTHER, 4)
     pts = grids[0]

@@ -12,7 +12,7 @@ methods call, so it does not import that class). What
    (``stages.start_stage``), or the given starts alone;
 2. the solves, one lane per start, in rounds (``stages.solve_rounds``; ``scipy``: in Python, one start after
    another, ``solver_scipy.solve_lanes``); the best lane of each fit;
-3. lobes the data do not see (switched off, or a needle between the samples: ``stages.unseen_lobes``) tried
+3. lobes the data do not see (switched off, or a needle between the samples: ``ParameterSpace.unseen_lobes``) tried
    again at every roughness, scored on every sample; the fit keeps what lowers its loss;
 4. the finish (``stages.finish_stage``): the loss afresh where the solver's own is not exact, metrics and
    J^T J where FitResults are made;
@@ -37,7 +37,7 @@ from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
 from . import init as _init
-from .stages import Stages, unseen_lobes
+from .stages import Stages
 from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_in_unit, prepare, resolve_model, stack_data
 from .._fit_defaults import STATUS_TEXT
@@ -117,7 +117,7 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
 
     # Lobes the data do not see: tried again at every roughness (scored on every sample), kept where better.
     spacing = sample_spacing(np.asarray(data.wo if np.ndim(data.wo) == 2 else data.wo[fits[0]]))
-    for lobe, flagged in unseen_lobes(space, v, spacing).items():
+    for lobe, flagged in space.unseen_lobes(v, spacing).items():
         which = np.flatnonzero(flagged)
         note(f"re-seeding the lobe of {lobe[0]}: the data do not see it")
         again = run.starts(fits[which], v[which][:, None, :], 1, grids=_init.reseed_grids(space, v[which], lobe),
@@ -193,17 +193,7 @@ def _unreached(run: Stages, fits: np.ndarray, v: np.ndarray, metrics: dict | Non
     table in another unit than a native model's reflectances <= 1 allow: x1e12 left every native model at
     rel_rmse 1.0, x1e-12 principled at 1e9, both "converged"). ``metrics``: every fit's, or None (then
     computed for the fits on their bounds)."""
-    from .space import AT_BOUND_RTOL, _span
-
-    space = run.space
-    scales = space.free & space.linear
-    if not scales.any():
-        scales = space.free
-    if not scales.any():
-        return
-    tol = AT_BOUND_RTOL * _span(space.model, space.lo, space.hi)
-    on = (v <= space.lo + tol) | (v >= space.hi - tol)
-    every = np.flatnonzero(np.all(on | ~scales, axis=1))
+    every = np.flatnonzero(run.space.scales_on_bounds(v))
     if not len(every):
         return
     if metrics is None:
@@ -246,15 +236,15 @@ def fit_measurements(measurements: Sequence[Measurement], model: str | Model, op
     caller named in the messages of bad starts."""
     preps = [prepare(m, weights) for m in measurements]
     mdl = resolve_model(model, preps[0].channels)
+    data = stack_data([p.data for p in preps])
+    # problem.data_unit: 1, or a power of ten for a table far from reflectance's range under a loss a unit
+    # only rescales (one for a batch, whose bounds are shared); results come back in the table's unit.
+    unit = data_unit(mdl, options.loss, data)
     space = options.space(mdl)
     try:
         given = None if starts is None else np.stack([space.start(s) for s in starts])
     except UsageError as exc:
         raise UsageError(f"{who}: {exc}") from None
-    data = stack_data([p.data for p in preps])
-    # problem.data_unit: 1, or a power of ten for a table far from reflectance's range under a loss a unit
-    # only rescales (one for a batch, whose bounds are shared); results come back in the table's unit.
-    unit = data_unit(mdl, options.loss, data)
     note("initialising: grid of starts" if grid else "initialising: the given start")
     note(f"solving: {options.solver}, {options.starts(mdl) if grid else 1} start(s)")
     res = solve(space, options, data, unit=unit, starts=given, grid=grid, results=True, check_given=check_given,

@@ -44,6 +44,10 @@ from ..models.compose import lobe_width
 #: A parameter within this fraction of its span of a bound counts as on it (span: the finite
 #: width of its box, or of ``Param.finite_range`` where the box is infinite).
 AT_BOUND_RTOL = 1e-6
+#: A lobe whose full width at half maximum is below this fraction of the sample spacing is a needle:
+#: at most the exact mirror samples see it (a scale and a roughness that only trade against each
+#: other there), so its shape is not fitted but left where the solve fell (:meth:`ParameterSpace.unseen_lobes`).
+NEEDLE_FRACTION = 0.1
 
 
 def _span(model: Model, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -261,6 +265,43 @@ class ParameterSpace:
                     parts.append(f"{side} in {word} {', '.join(str(i) for i in idx)}")
             if parts:
                 out[name] = "; ".join(parts)
+        return out
+
+    def scales_on_bounds(self, v) -> np.ndarray:
+        """(n,) bool, rows ``v`` (n, P): every free scale (linear entry; every free entry where no scale is
+        free) within AT_BOUND_RTOL of its span of a bound. False where nothing is free."""
+        v = np.atleast_2d(np.asarray(v, dtype=np.float64))
+        scales = self.free & self.linear
+        scales = scales if scales.any() else self.free
+        tol = AT_BOUND_RTOL * _span(self.model, self.lo, self.hi)
+        on = (v <= self.lo + tol) | (v >= self.hi - tol)
+        return np.all(on | ~scales, axis=1) & scales.any()
+
+    def unseen_lobes(self, v, spacing: float | None) -> dict[tuple[str, ...], np.ndarray]:
+        """lobe (``Model.lobes``: its parameter names) -> (n,) bool: the fits (rows of ``v`` (n, P)) whose lobe
+        the data do not see, among lobes with free nonlinear parameters: every scale (linear parameter) on its
+        lower bound 0 (the lobe is off, so its shape has no effect on the loss and a solver stopped there
+        never tried it: lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0), or a needle
+        (full width at half maximum below ``NEEDLE_FRACTION`` of the sample ``spacing``: a held-out yellow
+        paint's ggx fit ended at alpha 1.2e-4, ks 3.5e-5, where alpha 0.0148, ks 0.5 fits better and shows its
+        highlight). Where the fit driver tries them again (``driver.solve``)."""
+        m = self.model
+        v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
+        slices = dict(m.flat.slices)
+        widths = dict(lobe_halfwidths(m, v)) if spacing is not None else {}
+        out = {}
+        for lobe in m.lobes:
+            scales = [slices[n] for n in lobe.params if m.flat.linear[slices[n]].all()]
+            shapes = [slices[n] for n in lobe.params if not m.flat.linear[slices[n]].any()]
+            if not scales or not any(self.free[s].any() for s in shapes):
+                continue
+            off = np.ones(len(v), bool)
+            for s in scales:
+                off &= np.all((v[:, s] <= self.lo[s]) & (self.lo[s] == 0.0), axis=1)
+            # full width (twice the half width) against the spacing
+            needle = 2.0 * widths[lobe] < NEEDLE_FRACTION * spacing if lobe in widths else np.zeros(len(v), bool)
+            if (off | needle).any():
+                out[tuple(lobe.params)] = off | needle
         return out
 
     def bound_origin(self, name: str, side: str) -> str:

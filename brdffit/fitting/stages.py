@@ -8,7 +8,7 @@ beside the arrays every lane shares), so one compiled program serves any number 
 - :func:`start_stage`: the variable-projection grid (``init``) on a subset of the samples, and any
   starts the caller gives, ranked by their loss there: the ``k`` best starts of each lane. The default
   grid is built once per model and space (:func:`cached_grid`); a lobe the data do not see
-  (:func:`unseen_lobes`) is started again from a grid of its own (``init.reseed_grids``).
+  (``ParameterSpace.unseen_lobes``) is started again from a grid of its own (``init.reseed_grids``).
 - :func:`round_stage`: at most ``steps`` solver steps of each lane, from its start or from the
   state the previous round left (``state.Resume``). A vectorised solve runs every lane until its
   slowest is done, so :func:`solve_rounds` runs at most ``ROUND_STEPS`` steps per call; between calls
@@ -42,7 +42,6 @@ from .lanes import Plan, gather_rows, in_solve_dtype, map_lanes, per_lane, place
 from .losses import values_metrics
 from .objective import Objective, objective_of
 from .problem import Data
-from .space import lobe_halfwidths
 from .state import Rounds
 
 
@@ -270,41 +269,6 @@ def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes)
     pts = _init.grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
     pts.flags.writeable = False
     return pts
-
-
-#: A lobe whose full width at half maximum is below this fraction of the sample spacing is a needle:
-#: at most the exact mirror samples see it (a scale and a roughness that only trade against each
-#: other there), so its shape is not fitted but left where the solve fell.
-NEEDLE_FRACTION = 0.1
-
-
-def unseen_lobes(space, v: np.ndarray, spacing: float | None) -> dict[tuple[str, ...], np.ndarray]:
-    """lobe (``Model.lobes``: its parameter names) -> (n,) bool: the fits (rows of ``v`` (n, P)) whose lobe
-    the data do not see, among lobes with free nonlinear parameters: every scale (linear parameter) on its
-    lower bound 0 (the lobe is off, so its shape has no effect on the loss and a solver stopped there
-    never tried it: lambert+ggx+ggx on an RGL paper stopped at ggx's own loss with ggx1.ks 0), or a needle
-    (full width at half maximum below ``NEEDLE_FRACTION`` of the sample ``spacing``: a held-out yellow
-    paint's ggx fit ended at alpha 1.2e-4, ks 3.5e-5, where alpha 0.0148, ks 0.5 fits better and shows its
-    highlight)."""
-    m = space.model
-    v = np.asarray(v, dtype=np.float64).reshape(-1, m.n_free)
-    slices = dict(m.flat.slices)
-    linear = {p.name: p.linear for p in m.params}
-    widths = dict(lobe_halfwidths(m, v)) if spacing is not None else {}
-    out = {}
-    for lobe in m.lobes:
-        scales = [slices[n] for n in lobe.params if linear[n]]
-        shapes = [slices[n] for n in lobe.params if not linear[n]]
-        if not scales or not any(space.free[s].any() for s in shapes):
-            continue
-        off = np.ones(len(v), bool)
-        for s in scales:
-            off &= np.all((v[:, s] <= space.lo[s]) & (space.lo[s] == 0.0), axis=1)
-        # full width (twice the half width) against the spacing
-        needle = 2.0 * widths[lobe] < NEEDLE_FRACTION * spacing if lobe in widths else np.zeros(len(v), bool)
-        if (off | needle).any():
-            out[tuple(lobe.params)] = off | needle
-    return out
 
 
 class Stages:
