@@ -12,7 +12,7 @@ import pytest
 
 import brdffit
 from brdffit.fitting import init as grid_init
-from brdffit.fitting.stages import cached_grid
+from brdffit.fitting.init import cached_grid
 from brdffit.fitting.space import parameter_space
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.grid import ubo_pairs

@@ -9,7 +9,7 @@ methods call, so it does not import that class). What
 :func:`solve` runs, the same for one fit and for a million:
 
 1. starts: the variable-projection grid and any given starts, the best ``k`` of each fit
-   (``stages.start_stage``), or the given starts alone;
+   (``init.start_stage``), or the given starts alone;
 2. the solves, one lane per start, in rounds (``stages.solve_rounds``; ``scipy``: in Python, one start after
    another, ``solver_scipy.solve_lanes``); the best lane of each fit;
 3. lobes the data do not see (switched off, or a needle between the samples: ``ParameterSpace.unseen_lobes``) tried

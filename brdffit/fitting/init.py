@@ -6,8 +6,9 @@ f = f_0 + sum_j x_j A_j. ``A_j`` comes from one model evaluation per linear *par
 channels at once). The x_j are the box-constrained least-squares solution of the loss linearised
 at the reference (weights (dg/df(f_ref))^2, so that for the ``log`` loss the bright specular peak
 does not dominate): the unconstrained normal equations, clipped to the box, then a few sweeps of
-projected coordinate descent. Each grid point is scored by the true loss and the best K points
-start the solver (one vmapped solve, see ``solve.solve_starts``).
+projected coordinate descent. Each grid point is scored by the true loss, and the start stage
+(:func:`start_stage`, a compiled program of the fit's stages, run over lanes by ``stages.run_stage``) ranks
+the points with any starts the caller gives: the best K of each fit start its solves.
 
 Grid (structure-aware, small, so that the start costs less than the solve):
 
@@ -36,9 +37,10 @@ import numpy as np
 
 from ..models.base import Model, Param
 from . import losses as L
+from .lanes import in_solve_dtype, map_lanes
 from .linalg import spd_solve
 from .problem import Data
-from .objective import basis_fn, separable
+from .objective import Objective, basis_fn, separable
 
 POINTS_ROUGHNESS = 10
 #: Roughness values shared by repeated lobes (their strictly increasing pairs: 45 for 10 values; 8 values missed the best basin of vch_golden_yellow).
@@ -147,6 +149,21 @@ def grid_for(model: Model, lo, hi, free, anchor) -> np.ndarray:
             pt[cols] = rows[r]
         points.append(pt)
     return np.asarray(points, dtype=np.float64)
+
+
+def cached_grid(model: Model, lo, hi, free, anchor) -> np.ndarray:
+    """:func:`grid_for`, built once per model and space (read-only)."""
+    arrays = (np.asarray(lo, np.float64), np.asarray(hi, np.float64), np.asarray(free, bool),
+              np.asarray(anchor, np.float64))
+    return _cached_grid(model, *(a.tobytes() for a in arrays))
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
+    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
+    pts = grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
+    pts.flags.writeable = False
+    return pts
 
 
 def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
@@ -302,6 +319,44 @@ def take_rows(data: Data, idx) -> Data:
     """The samples ``idx`` of every per-sample array (``floor`` is per channel: kept whole)."""
     n = data[0].shape[0]
     return Data(*(a[idx] if a.ndim and a.shape[0] == n else a for a in data))
+
+
+# -- the start stage (a compiled program that ``stages.run_stage`` runs over lanes) ---------------------
+@functools.lru_cache(maxsize=None)
+def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
+    """run(lane, data, grid_points (G, m), lo, hi, free, anchor, subset (S,) int) -> (starts (L, k, P), values
+    (L, k)): per lane the k candidates with the lowest loss on the ``subset`` rows, among the grid points
+    (:func:`vp_grid`: the linear parameters solved at each) when ``grid``, and the E given starts. ``lane``:
+    the given starts (L, E, P), or (grids (L, G, m), given) for a grid of each lane's own (then
+    ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
+    vp = vp_grid(objective.model, objective.loss)
+    residual = objective.residual
+
+    def one(grid_points, given, data, lo, hi, free, anchor, subset):
+        sub = take_rows(in_solve_dtype(data), subset)
+        given = jnp.where(free, jnp.clip(given, lo, hi), anchor)
+
+        def subset_loss(v):
+            r = residual(v, sub)
+            r = jnp.where(jnp.isfinite(r), r, jnp.inf)  # as in vp_grid: the loss computed in XLA's own loop
+            value = r @ r
+            return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+        flats, values = [given], [jax.vmap(subset_loss)(given)]
+        if grid:
+            g_flats, g_values = vp(grid_points, sub, lo, hi, free, anchor)
+            flats.insert(0, g_flats)
+            values.insert(0, g_values)
+        flats, values = jnp.concatenate(flats), jnp.concatenate(values)
+        order = jnp.argsort(values, stable=True)[:k]
+        return flats[order], values[order]
+
+    def run(lane, data, grid_points, lo, hi, free, anchor, subset):
+        if isinstance(lane, tuple):  # (grids (L, G, m), given): a grid of each lane's own (a lobe re-seeded)
+            return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, anchor, subset), lane, data, lanes)
+        return map_lanes(lambda g, d: one(grid_points, g, d, lo, hi, free, anchor, subset), lane, data, lanes)
+
+    return run
 
 
 #: Most points of a re-seeding grid (:func:`reseed_grids`). It is scored on every sample, not on the start

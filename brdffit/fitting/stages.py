@@ -5,10 +5,10 @@
 program works on a chunk of lanes (``lanes``: a lane is one solve, with its own row of the per-fit arrays
 beside the arrays every lane shares), so one compiled program serves any number of fits of a shape.
 
-- :func:`start_stage`: the variable-projection grid (``init``) on a subset of the samples, and any
-  starts the caller gives, ranked by their loss there: the ``k`` best starts of each lane. The default
-  grid is built once per model and space (:func:`cached_grid`); a lobe the data do not see
-  (``ParameterSpace.unseen_lobes``) is started again from a grid of its own (``init.reseed_grids``).
+- ``init.start_stage``: the variable-projection grid on a subset of the samples, and any starts the
+  caller gives, ranked by their loss there: the ``k`` best starts of each lane. The default grid is
+  built once per model and space (``init.cached_grid``; :class:`Stages` holds it); a lobe the data do
+  not see (``ParameterSpace.unseen_lobes``) is started again from a grid of its own (``init.reseed_grids``).
 - :func:`round_stage`: at most ``steps`` solver steps of each lane, from its start or from the
   state the previous round left (``state.Resume``). A vectorised solve runs every lane until its
   slowest is done, so :func:`solve_rounds` runs at most ``ROUND_STEPS`` steps per call; between calls
@@ -30,13 +30,12 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .._fit_defaults import SOLVERS
 from ..errors import UsageError
-from ..models.base import Model
 from . import init as _init
+from .init import cached_grid, start_stage
 from .cache import compiled
 from .lanes import Plan, gather_rows, in_solve_dtype, map_lanes, per_lane, place_lanes, plan, shared_geometry
 from .losses import values_metrics
@@ -67,43 +66,6 @@ ROUND_MIN_LANES = 4
 
 
 # -- stages -----------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
-def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
-    """run(lane, data, grid_points (G, m), lo, hi, free, anchor, subset (S,) int) -> (starts (L, k, P), values
-    (L, k)): per lane the k candidates with the lowest loss on the ``subset`` rows, among the grid points
-    (``init.vp_grid``: the linear parameters solved at each) when ``grid``, and the E given starts. ``lane``:
-    the given starts (L, E, P), or (grids (L, G, m), given) for a grid of each lane's own (then
-    ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
-    vp = _init.vp_grid(objective.model, objective.loss)
-    residual = objective.residual
-
-    def one(grid_points, given, data, lo, hi, free, anchor, subset):
-        sub = _init.take_rows(in_solve_dtype(data), subset)
-        given = jnp.where(free, jnp.clip(given, lo, hi), anchor)
-
-        def subset_loss(v):
-            r = residual(v, sub)
-            r = jnp.where(jnp.isfinite(r), r, jnp.inf)  # as in init.vp_grid: the loss computed in XLA's own loop
-            value = r @ r
-            return jnp.where(jnp.isfinite(value), value, jnp.inf)
-
-        flats, values = [given], [jax.vmap(subset_loss)(given)]
-        if grid:
-            g_flats, g_values = vp(grid_points, sub, lo, hi, free, anchor)
-            flats.insert(0, g_flats)
-            values.insert(0, g_values)
-        flats, values = jnp.concatenate(flats), jnp.concatenate(values)
-        order = jnp.argsort(values, stable=True)[:k]
-        return flats[order], values[order]
-
-    def run(lane, data, grid_points, lo, hi, free, anchor, subset):
-        if isinstance(lane, tuple):  # (grids (L, G, m), given): a grid of each lane's own (a lobe re-seeded)
-            return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, anchor, subset), lane, data, lanes)
-        return map_lanes(lambda g, d: one(grid_points, g, d, lo, hi, free, anchor, subset), lane, data, lanes)
-
-    return run
-
-
 @functools.lru_cache(maxsize=None)
 def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max_steps: int, first: bool, lanes: int):
     """run((v (L, P), resume), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)):
@@ -255,22 +217,6 @@ def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: in
     return Rounds(v, state.c, state.c0, state.H, out["code"], out["steps"], compile_s, run_s)
 
 
-# -- starts -----------------------------------------------------------------------------------------------
-def cached_grid(model: Model, lo, hi, free, anchor) -> np.ndarray:
-    """``init.grid_for``, built once per model and space (read-only)."""
-    arrays = (np.asarray(lo, np.float64), np.asarray(hi, np.float64), np.asarray(free, bool),
-              np.asarray(anchor, np.float64))
-    return _cached_grid(model, *(a.tobytes() for a in arrays))
-
-
-@functools.lru_cache(maxsize=64)
-def _cached_grid(model: Model, lo: bytes, hi: bytes, free: bytes, anchor: bytes) -> np.ndarray:
-    lo, hi, anchor = (np.frombuffer(b, dtype=np.float64) for b in (lo, hi, anchor))
-    pts = _init.grid_for(model, lo, hi, np.frombuffer(free, dtype=bool), anchor)
-    pts.flags.writeable = False
-    return pts
-
-
 class Stages:
     """The stages of one call of the fit driver (``driver.solve``) run here: the space, the options, the data
     and the plan they share, and the seconds they take (compile, run; the starts' also as "init").
@@ -283,6 +229,8 @@ class Stages:
         self.objective = objective_of(self.model, options.loss, options.jacobian)
         self.plan = plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
+        #: The default grid of starts of this model and space (``init.cached_grid``: built once per model and space).
+        self.grid = cached_grid(self.model, *self.bounds, space.anchor)
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
     def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
@@ -299,7 +247,7 @@ class Stages:
         if not grid:
             points, lane_args = np.zeros((0, 1)), given
         elif grids is None:
-            points = cached_grid(self.model, lo, hi, free, self.space.anchor)
+            points = self.grid
             lane_args = given
         else:
             points, lane_args = np.zeros((0, 0)), (grids, given)
