@@ -94,10 +94,10 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     n, P = len(fits), model.n_free
     k = options.starts(model)
     unscale = np.where(space.linear, unit, 1.0)
-    table = Stages(space, options, data, note)
     # The solves, in the solve's unit (a copy of the values when it is not 1: a table far from
     # reflectance's range under a loss a unit only rescales).
-    run = table if unit == 1.0 else Stages(space.in_unit(unit), options, in_unit(data, unit), note, table.seconds)
+    table_space, table_data = space, data
+    run = Stages(space.in_unit(unit), options, in_unit(data, unit), note)
     space = run.space
     given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, -1, P)
     if grid:
@@ -159,8 +159,9 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
         _far_from_default(run, fits, v, loss, code, notes)
     v, jtj = space.canonical_rows(v, jtj)
     if unit != 1.0:  # back in the table's unit: the loss, metrics and J^T J of the table there
-        v, start = table.space.clip(v * unscale), start * unscale
+        v, start = table_space.clip(v * unscale), start * unscale
         if results:
+            table = Stages(table_space, options, table_data, note, run.seconds)
             out = table.finish(v, fits, metrics=True, jtj=True)
             loss, metrics, jtj = out["loss"], out["metrics"], out["jtj"]
         else:
