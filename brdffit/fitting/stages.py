@@ -34,8 +34,7 @@ import numpy as np
 
 from .._fit_defaults import SOLVERS
 from ..errors import UsageError
-from . import init as _init
-from .init import cached_grid, start_stage
+from .init import cached_grid, start_stage, subset_rows
 from .cache import compiled
 from .lanes import Plan, gather_rows, in_solve_dtype, map_lanes, per_lane, place_lanes, plan, shared_geometry
 from .losses import values_metrics
@@ -253,7 +252,7 @@ class Stages:
             points, lane_args = np.zeros((0, 0)), (grids, given)
         k = max(1, min(k, (len(points) if grids is None else np.shape(grids)[1]) + np.shape(given)[1]))
         if subset is None:
-            subset = _init.subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
+            subset = subset_rows(Data(*(a[0] if own else a for a, own in zip(self.data, per_lane(self.data)))))
         key = (self.objective, k, grid, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
