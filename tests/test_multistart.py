@@ -12,7 +12,6 @@ import pytest
 
 import brdffit
 from brdffit.fitting import init as grid_init
-from brdffit.fitting.init import cached_grid
 from brdffit.fitting.space import parameter_space
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.grid import ubo_pairs
@@ -21,7 +20,7 @@ from brdffit.grid import ubo_pairs
 def best_grid_starts(mdl, loss, data, space, anchor, k):
     """The k best points of the variable-projection grid (``init.vp_grid``), scored on the rows the
     grid scores (``init.subset_rows``): what a fit's start stage ranks, computed here on its own."""
-    grid = jnp.asarray(cached_grid(mdl, space.lo, space.hi, space.free, anchor))
+    grid = jnp.asarray(grid_init.cached_grid(mdl, space.lo, space.hi, space.free, anchor))
     rows = grid_init.take_rows(data, grid_init.subset_rows(data))
     flats, values = jax.jit(grid_init.vp_grid(mdl, loss))(
         grid, rows, jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free, dtype=bool),
