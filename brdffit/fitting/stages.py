@@ -228,9 +228,14 @@ class Stages:
         self.objective = objective_of(self.model, options.loss, options.jacobian)
         self.plan = plan(options.chunk, options.lanes)
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
-        #: The default grid of starts of this model and space (``init.cached_grid``: built once per model and space).
-        self.grid = cached_grid(self.model, *self.bounds, space.anchor)
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
+
+    @functools.cached_property
+    def grid(self) -> np.ndarray:
+        """The default grid of starts of this model and space (``init.cached_grid``: built once per model and
+        space), built when a start stage first ranks it: a call that solves from given starts alone, or only
+        finishes (the table's own ``Stages`` of a fit solved in another unit), never needs it."""
+        return cached_grid(self.model, *self.bounds, self.space.anchor)
 
     def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
         self.seconds["compile"] += compile_s
