@@ -150,3 +150,31 @@ def test_tiles_of_a_run_in_another_precision_are_another_runs(small_btf, tmp_pat
     btf_run.write_run(tmp_path / "tiles", older)
     with pytest.raises(brdffit.UsageError, match="holds tiles of another run"):
         btf_run.prepare(tmp_path / "tiles", default, force=False, main=True, barrier=lambda name: None)
+
+
+@pytest.mark.parametrize("near", [True, False])
+def test_lm_damps_its_first_step_less_from_a_near_start(near):
+    """lm's first step solves (H + lam diag H) d = -g: on a problem linear in its parameters (lambert under the l2
+    loss, an exact table) each channel's kd moves from its start s to s + (kd_true - s) / (1 + lam), worked out by
+    hand. lam is START_DAMPING from a guess, the smaller NEAR_START_DAMPING from a fit's one start that lies near
+    its optimum (``near=True``: a BTF texel's fitted neighbours that agree); the best of several given starts that
+    differ (neighbours that disagree) is a guess."""
+    import numpy as np
+
+    from brdffit._fit_defaults import NEAR_START_DAMPING, START_DAMPING
+    from brdffit.fitting import driver
+    from brdffit.fitting.options import FitOptions
+    from brdffit.fitting.problem import prepare_values
+    from brdffit.grid import ubo_pairs
+
+    assert NEAR_START_DAMPING < START_DAMPING
+    model = models.get("lambert")
+    kd_true, kd0, kd1 = np.array([0.5, 0.3, 0.2]), np.array([0.2, 0.6, 0.1]), np.array([0.9, 0.1, 0.4])
+    wi, wo = ubo_pairs()
+    values = np.asarray(model.eval({"kd": kd_true}, wi, wo))
+    data = prepare_values(np.stack([values, values]), wi, wo, np.ones(len(wi)))
+    options = FitOptions(loss="l2", max_steps=1)
+    starts = np.stack([[kd0, kd0], [kd0, kd1]])  # one start; two that differ
+    res = driver.solve(options.space(model), options, data, starts=starts, grid=False, near=near, results=False)
+    lam = np.array([NEAR_START_DAMPING if near else START_DAMPING, START_DAMPING])[:, None]
+    np.testing.assert_allclose(res.v, res.start + (kd_true - res.start) / (1 + lam), rtol=1e-10)

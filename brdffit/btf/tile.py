@@ -7,7 +7,8 @@ later texel starts from the mean of the results of its nearest texels fitted in 
 (those at the nearest distance, 1 or 1.4 texels away: up to four, which surround it) where they
 agree (``AGREE``), else from the one of them whose result fits the texel's data best (ranked on the
 grid's rows, as the grid's points are), without the grid; a texel that does not converge so is
-fitted again from the grid. The mean of the surrounding results is nearer a smooth map's value
+fitted again from the grid. A mean of agreeing neighbours lies near the texel's optimum: its first step
+is damped less than a guess's (``driver.solve(near=True)``, ``_fit_defaults.NEAR_START_DAMPING``). The mean of the surrounding results is nearer a smooth map's value
 than any one of them: a 64 x 64 ggx BTF's texels took 1.96 instead of 2.49 steps on average, 837
 instead of 685-721 texels/s on one core. Where they disagree the texel lies at an edge between
 materials, or in a texture that changes from texel to texel: the first of them, taken before,
@@ -219,7 +220,7 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
     from ..fitting.driver import solve
 
     res = solve(run.space, run.options, run.data, unit=run.unit, fits=texels, starts=starts, grid=starts is None,
-                results=False)
+                near=starts is not None, results=False)
     if run.clock is not None:
         run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]
         run.clock["solve"] = run.clock.get("solve", 0.0) + res.seconds["run"]

@@ -40,7 +40,7 @@ from . import init as _init
 from .stages import Stages
 from .options import FitOptions
 from .problem import Data, Prepared, data_unit, in_unit, loss_in_unit, prepare, resolve_model, stack_data
-from .._fit_defaults import STATUS_TEXT
+from .._fit_defaults import NEAR_START_DAMPING, START_DAMPING, STATUS_TEXT
 from .space import ParameterSpace, fit_warnings, sample_spacing
 
 #: Condition number of J'J above which standard errors are not reported.
@@ -77,16 +77,18 @@ def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
 
 
 def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float = 1.0, fits: np.ndarray | None = None,
-          starts: np.ndarray | None = None, grid: bool = True, results: bool = True, check_given: bool = False,
-          note: Callable[[str], None] = _quiet, progress=None) -> Solved:
+          starts: np.ndarray | None = None, grid: bool = True, near: bool = False, results: bool = True,
+          check_given: bool = False, note: Callable[[str], None] = _quiet, progress=None) -> Solved:
     """Fit the fits ``fits`` (rows of the per-fit fields; default: all) of ``data`` (``Data``: ref and floor
     with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;
     the results' rows follow ``fits``. ``unit``: the unit the fits are solved in (``problem.data_unit`` of
     the table: 1, or a power of ten); ``data``, ``space``, ``starts`` and every result are in the table's.
     ``starts``: (len(fits), P) given starts, or (len(fits), E, P) E candidates each, ranked beside the grid's
     points (``grid``); without the grid a fit's candidates are ranked where they differ (on the grid's
-    rows, as its points are), and the best starts it. ``results``: also every metric and J^T J (for FitResults; else the
-    loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
+    rows, as its points are), and the best starts it. ``near``: the given starts lie near their fits' optima (a
+    BTF's fitted neighbours' results): lm's first step from a fit's one start is nearly Gauss-Newton's
+    (``_fit_defaults.NEAR_START_DAMPING``; the grid's points, and the best of several that differ, are guesses). ``results``: also every metric and
+    J^T J (for FitResults; else the loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
     not converged when it ends far above that (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with
     the share of the fits whose solves ended, as they end."""
     model = space.model
@@ -100,15 +102,20 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     run = Stages(space.in_unit(unit), options, in_unit(data, unit), note)
     space = run.space
     given = np.zeros((n, 0, P)) if starts is None else (np.asarray(starts, np.float64) / unscale).reshape(n, -1, P)
+    damping = START_DAMPING  # the grid's points are guesses
     if grid:
         candidates = run.starts(fits, given, k)
     else:  # the given starts alone: where a fit has several that differ, the best on the grid's rows
         candidates = given[:, :1].copy()
-        choice = np.flatnonzero(np.any(given != given[:, :1], axis=(1, 2)))
+        differ = np.any(given != given[:, :1], axis=(1, 2))
+        choice = np.flatnonzero(differ)
         if len(choice):
             candidates[choice] = run.starts(fits[choice], given[choice], 1, grid=False)
+        # A fit's one start that lies near its optimum takes a nearly Gauss-Newton first step; the best of
+        # several that differ (a texel between materials) is a guess.
+        damping = np.where(near & ~differ, NEAR_START_DAMPING, START_DAMPING)
     k = candidates.shape[1]
-    r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress)
+    r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress, damping=damping)  # k is 1 without the grid
     best = _best_of(r.loss, n, k)
     v, loss, code, steps = r.v[best], r.loss[best], r.code[best], r.steps[best].copy()
     start, start_loss, jtj = candidates.reshape(n * k, P)[best], r.start_loss[best], r.jtj[best]

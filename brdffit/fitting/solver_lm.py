@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._fit_defaults import START_DAMPING
 from .linalg import inverse_quadratic_form, spd_solve
 from .objective import Objective
 from .state import Resume
@@ -74,7 +75,8 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     """Projected Levenberg-Marquardt with an active set per iteration, for a flat parameter vector.
 
     options: ``lower``, ``upper`` (P,) bounds (may be infinite), ``free`` (P,) bool (False: held at
-    the start value). The start must lie in the box.
+    the start value); ``damping``: lam of the first step (default ``START_DAMPING``). The start must lie in
+    the box.
 
     One iteration: with r and J the residual and Jacobian at the current point (forward mode),
     g = J^T r, H = J^T J. Held: parameters not free, and those on a bound whose gradient points
@@ -113,7 +115,8 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
                             done=jnp.asarray(False), result=optx.RESULTS.successful, taken=jnp.asarray(0))
         c, g, H = self._normal(fn, y, args)
         dtype = y.dtype
-        return _LMState(c=c, c0=c, g=g, H=H, lam=jnp.asarray(1e-3, dtype), nu=jnp.asarray(2.0, dtype),
+        lam = jnp.asarray(options.get("damping", START_DAMPING), dtype)
+        return _LMState(c=c, c0=c, g=g, H=H, lam=lam, nu=jnp.asarray(2.0, dtype),
                         done=jnp.asarray(False), result=optx.RESULTS.successful, taken=jnp.asarray(0))
 
     def step(self, fn, y, args, options, state: _LMState, tags):
@@ -195,19 +198,21 @@ class BoundedLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
 
 
 def solve_lm(objective: Objective, rtol: float, atol: float, max_steps: int):
-    """run(v0 (P,), data, lo, hi, free, consts, resume=None, steps=None) -> (v, Resume, done, code, steps) with
-    :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most ``max_steps``
-    steps (or ``steps``, a run-time budget below it) from v0, or from a previous round's ``resume`` (then v0
-    is that round's v).
+    """run(v0 (P,), data, lo, hi, free, consts, resume=None, steps=None, damping=None) -> (v, Resume, done, code,
+    steps) with :class:`BoundedLevenbergMarquardt` on the model's structured normal equations: at most ``max_steps``
+    steps (or ``steps``, a run-time budget below it) from v0 (``damping``: the first step's, a run-time scalar;
+    None: ``START_DAMPING``), or from a previous round's ``resume`` (then v0 is that round's v).
     ``Resume.c`` is the loss at v, ``Resume.H`` J^T J there, ``Resume.c0`` the loss at the first start;
     ``done``: the solver's own test passed."""
     fn, ne = objective.residual, objective.normal_equations
     # args = (data, g(f_ref), direction-only terms): computed once per fit, not at every step.
     solver = BoundedLevenbergMarquardt(rtol=rtol, atol=atol, normal_equations=lambda y, a: ne(y, *a))
 
-    def run(v0, data, lo, hi, free, consts, resume=None, steps=None):
+    def run(v0, data, lo, hi, free, consts, resume=None, steps=None, damping=None):
         v0 = jnp.clip(v0, lo, hi)
         options = {"lower": lo, "upper": hi, "free": free, "loss_floor": consts.loss_floor}
+        if damping is not None:
+            options["damping"] = damping
         if resume is not None:
             options["resume"] = resume
         if steps is not None:

@@ -32,7 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
-from .._fit_defaults import SOLVERS
+from .._fit_defaults import SOLVERS, START_DAMPING
 from ..errors import UsageError
 from .init import cached_grid, start_stage, subset_rows
 from .cache import compiled
@@ -67,20 +67,20 @@ ROUND_MIN_LANES = 4
 # -- stages -----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
 def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max_steps: int, first: bool, lanes: int):
-    """run((v (L, P), resume), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)):
-    at most ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v
-    (``resume`` is None); else from the previous round's ``resume`` (``state.Resume``, one row per
-    lane). A stock solver (not resumable) runs ``max_steps`` in its one round; its ``resume`` holds the loss
-    at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
+    """run((v (L, P), then), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)): at most
+    ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v, ``then`` (L,)
+    each lane's damping of lm's first step (``_fit_defaults.START_DAMPING``); else from the previous round's state,
+    ``then`` its ``resume`` (``state.Resume``, one row per lane). A stock solver (not resumable) runs ``max_steps``
+    in its one round; its ``resume`` holds the loss at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
     from .solve import solve_one  # optimistix: imported only when a program is traced
 
     solve = solve_one(objective, solver, rtol, atol, max_steps)
 
-    def one(v, resume, data, lo, hi, free, steps, geometry):
+    def one(v, then, data, lo, hi, free, steps, geometry):
         data = in_solve_dtype(data)
         consts = objective.constants(data, geometry)
         if solver in RESUMABLE:
-            return solve(v, data, lo, hi, free, consts, resume, steps)
+            return solve(v, data, lo, hi, free, consts, *((None, steps, then) if first else (then, steps)))
         return solve(v, data, lo, hi, free, consts)
 
     def run(lane, data, lo, hi, free, steps):
@@ -171,13 +171,16 @@ def _key(stage: str, objective, *options) -> tuple:
 
 
 def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: int, v0: np.ndarray,
-                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, progress=None, note=None) -> Rounds:
+                 data: Data, fits: np.ndarray, bounds: tuple, p: Plan, *, damping=START_DAMPING, progress=None,
+                 note=None) -> Rounds:
     """Solve every lane from ``v0`` (L, P) (lane i reads row ``fits[i]`` of the per-fit fields) in rounds of
     at most ``ROUND_STEPS`` steps; between rounds the lanes that are done leave (see the module docstring).
-    ``bounds``: (lo, hi, free). A stock optimistix solver runs all its steps in one round.
+    ``bounds``: (lo, hi, free). ``damping``: lm's first step's, one for every lane or (L,) each lane's. A stock
+    optimistix solver runs all its steps in one round.
     ``progress(fraction)``: called after each round with the share of the lanes that ended in it."""
     n = len(v0)
     v = np.array(v0, dtype=np.float64)
+    damping = np.broadcast_to(np.asarray(damping, np.float64), (n,))
     out = {"code": np.zeros(n, int), "steps": np.zeros(n, int)}
     state = None
     active = np.arange(n)
@@ -192,7 +195,7 @@ def solve_rounds(objective, solver: str, rtol: float, atol: float, max_steps: in
         rounds = resumable and p.lanes > 1 and len(active) > ROUND_MIN_LANES
         steps = min(ROUND_STEPS, max_steps - taken) if rounds else max_steps - taken
         build_args = (objective, solver, rtol, atol, max_steps, first, p.lanes)
-        lane_args = (v[active], None if first else jax.tree_util.tree_map(lambda a: a[active], state))
+        lane_args = (v[active], damping[active] if first else jax.tree_util.tree_map(lambda a: a[active], state))
         res, c_s, r_s = run_stage(_key("round", *build_args), lambda: round_stage(*build_args), lane_args, data,
                                   fits[active], (*bounds, np.int32(steps)), p, note=note)
         compile_s, run_s = compile_s + c_s, run_s + r_s
@@ -264,7 +267,7 @@ class Stages:
         self._count(c_s, r_s, init=True)
         return out[0]
 
-    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None) -> Rounds:
+    def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None, damping=START_DAMPING) -> Rounds:
         o = self.options
         if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
             from .solver_scipy import solve_lanes
@@ -273,7 +276,7 @@ class Stages:
                             max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
         else:
             r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                             self.bounds, self.plan, progress=progress, note=self.note)
+                             self.bounds, self.plan, damping=damping, progress=progress, note=self.note)
         self._count(r.compile_s, r.run_s)
         return r
 
