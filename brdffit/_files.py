@@ -54,6 +54,10 @@ STOP_REQUESTED = threading.Event()
 #: another thread sees a result either not yet committed or committed and listed, never half-way.
 _GUARD = threading.RLock()
 _RESERVED: dict[str, Path] = {}
+#: Lock files this process has opened and not yet closed (descriptor -> path), listed in the same step as
+#: they are made (under ``_GUARD``): an interrupt between making one and listing its target in
+#: ``_RESERVED`` (seen in CI: Ctrl-C as the lock was being taken) still finds it.
+_LOCKS: dict[int, Path] = {}
 _COMMITTED: list[Path] = []
 #: Targets whose commit completes a result of several files (:func:`complete_with`): once one is
 #: committed, everything committed before it stays, whatever interrupts the run afterwards.
@@ -199,7 +203,9 @@ def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = 
     try:
         parent.mkdir(parents=True, exist_ok=True)
         lock = parent / _hidden(path, "lock")
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        with _GUARD:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            _LOCKS[fd] = lock
     except OSError as exc:
         raise UsageError(f"{path}: cannot write here ({exc.strerror or exc}: {exc.filename or parent})") from None
     try:
@@ -239,14 +245,22 @@ def _release(fd: int, lock: Path) -> None:
     here covers a run interrupted between open() and flock(), which would otherwise leave the file
     behind; a lock another run holds, or a file another run made since, is left alone. (A run that
     opened the file meanwhile sees, once it has the lock, that the file at the path is not its own.)"""
+    with _GUARD:
+        try:
+            _remove_lock_file(fd, lock)
+        finally:
+            _LOCKS.pop(fd, None)
+            os.close(fd)
+
+
+def _remove_lock_file(fd: int, lock: Path) -> None:
+    """Remove ``lock`` (opened as ``fd``) if this run holds its lock or can take it."""
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         if _same_file(fd, lock):
             os.unlink(lock)
     except OSError:
         pass  # another run holds it, or it is gone already
-    finally:
-        os.close(fd)
 
 
 @contextlib.contextmanager
@@ -316,12 +330,12 @@ def remove_this_runs_outputs(timeout: float = 10.0) -> None:
         shutil.rmtree(path, ignore_errors=True)
     for path in _COMMITTED:
         _remove(path)
-    for key, lock in list(_RESERVED.items()):
+    for key in list(_RESERVED):
         path = Path(key)
         for entry in path.parent.glob(f"{_hidden(path, 'new-')}*"):
             _remove(entry)
-        with contextlib.suppress(OSError):
-            lock.unlink()
+    for fd, lock in list(_LOCKS.items()):  # held, or made and about to be taken
+        _remove_lock_file(fd, lock)
 
 
 # -- scratch folders and helper processes ---------------------------------------------------------

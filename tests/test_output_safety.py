@@ -245,6 +245,41 @@ def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path):
     assert list(next_one.iterdir()) == []
 
 
+@pytest.mark.parametrize("moment", ["before the lock is taken", "after it is taken"])
+def test_the_interrupt_handler_removes_a_lock_file_made_a_moment_ago(tmp_path, monkeypatch, moment):
+    """The executable's Ctrl-C handler (``remove_this_runs_outputs``, then the process ends at once) while the
+    run is taking its lock: the lock file it has made is removed too (CI, once: Ctrl-C as soon as the lock
+    file appeared left it behind; the handler knew only the targets listed after the lock was taken)."""
+    import fcntl
+
+    from brdffit import _files
+
+    seen = []
+
+    def handler_runs_here():
+        _files.remove_this_runs_outputs(timeout=1.0)
+        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+        _files._GUARD.release()  # the handler would end the process here, holding it
+        raise SystemExit(130)
+
+    if moment == "before the lock is taken":
+        real_flock, calls = fcntl.flock, []
+
+        def flock(fd, op):
+            calls.append(op)
+            if len(calls) == 1:  # the run's own; the handler's is the second
+                handler_runs_here()
+            return real_flock(fd, op)
+
+        monkeypatch.setattr(_files.fcntl, "flock", flock)
+    else:
+        monkeypatch.setattr(_files, "_clean_leftovers", lambda path: handler_runs_here())
+    _files.forget_committed()
+    with pytest.raises(SystemExit), reserve(tmp_path / "out", folder=True):
+        pass
+    assert seen == [[]]
+
+
 def test_a_mark_of_an_earlier_command_completes_nothing_of_the_next(tmp_path):
     """``complete_with`` belongs to the command that said it: a command that ended before its last file
     (an in-process run interrupted, a database stopped by bad input) leaves no mark that would keep the
