@@ -205,7 +205,20 @@ def test_ctrl_c_at_a_fixed_moment_ends_at_once_with_nothing_written(tmp_path, mo
     assert list(tmp_path.iterdir()) == []
 
 
-def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path):
+@pytest.fixture
+def handler_sees_this_test_alone(monkeypatch):
+    """The executable's Ctrl-C handler (``_files.remove_this_runs_outputs``), called in this test process, sees only
+    what the test lists itself: it kills every helper process and removes every scratch folder and result this
+    process listed, so a BTF's worker processes kept by a test that ran before in this process died with it (the
+    next run in them failed: "the worker process on core 0 ended (exit status -9)")."""
+    from brdffit import _files
+
+    for name, empty in (("_RESERVED", {}), ("_LOCKS", {}), ("_COMMITTED", []), ("_COMPLETING", set()),
+                        ("_SCRATCH", []), ("_PROCESSES", [])):
+        monkeypatch.setattr(_files, name, empty)
+
+
+def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path, handler_sees_this_test_alone):
     """The executable's Ctrl-C handler removes what this command wrote, a committed result too (the
     old handler reported 130 with the result written when the signal came after the commit)."""
     from brdffit import _files
@@ -221,7 +234,7 @@ def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path):
     _files.forget_committed()
 
 
-def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path):
+def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path, handler_sees_this_test_alone):
     """A result of several files (a BTF material: previews, summary, then params.exr) is kept from the
     moment its last file is committed, in the same step: an interrupt right after took the finished
     material back (CI: the database run's Ctrl-C once cork/params.exr existed)."""
@@ -246,7 +259,8 @@ def test_an_interrupt_keeps_a_result_completed_by_its_last_file(tmp_path):
 
 
 @pytest.mark.parametrize("moment", ["before the lock is taken", "after it is taken"])
-def test_the_interrupt_handler_removes_a_lock_file_made_a_moment_ago(tmp_path, monkeypatch, moment):
+def test_the_interrupt_handler_removes_a_lock_file_made_a_moment_ago(tmp_path, monkeypatch, moment,
+                                                                    handler_sees_this_test_alone):
     """The executable's Ctrl-C handler (``remove_this_runs_outputs``, then the process ends at once) while the
     run is taking its lock: the lock file it has made is removed too (CI, once: Ctrl-C as soon as the lock
     file appeared left it behind; the handler knew only the targets listed after the lock was taken)."""
@@ -280,7 +294,7 @@ def test_the_interrupt_handler_removes_a_lock_file_made_a_moment_ago(tmp_path, m
     assert seen == [[]]
 
 
-def test_a_mark_of_an_earlier_command_completes_nothing_of_the_next(tmp_path):
+def test_a_mark_of_an_earlier_command_completes_nothing_of_the_next(tmp_path, handler_sees_this_test_alone):
     """``complete_with`` belongs to the command that said it: a command that ended before its last file
     (an in-process run interrupted, a database stopped by bad input) leaves no mark that would keep the
     next command's files from an interrupt."""
