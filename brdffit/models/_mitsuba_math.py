@@ -256,9 +256,9 @@ def build_rough_tables(path: Path = TABLE_FILE) -> None:
     transmittance = np.array([np.asarray(trans(jnp.float64(a), jnp.asarray(etas))) for a in alphas])
     reflectance = np.zeros((len(alphas), len(mu), TABLE_U + 3))
     for i, a in enumerate(alphas):
-        for k, m in enumerate(mu):
-            c = m + a * np.sinh(u_lo[i, k] + u_step[i, k] * np.arange(0, TABLE_U + 1))
-            inner = np.asarray(refl(jnp.float64(a), jnp.asarray(1.0 / np.sqrt(1.0 - c * c)), jnp.float64(m)))
+        for k, mu_k in enumerate(mu):  # not ``m``: that is the module ``_math`` here
+            c = mu_k + a * np.sinh(u_lo[i, k] + u_step[i, k] * np.arange(0, TABLE_U + 1))
+            inner = np.asarray(refl(jnp.float64(a), jnp.asarray(1.0 / np.sqrt(1.0 - c * c)), jnp.float64(mu_k)))
             # the node beyond each end, for the cubic's first and last interval: extrapolated (in
             # u, one step may leave the cosines' range at small alpha)
             reflectance[i, k] = np.concatenate([[2 * inner[0] - inner[1]], inner, [2 * inner[-1] - inner[-2]]])
