@@ -168,6 +168,19 @@ def test_known_truth_every_texel_as_good_as_a_single_fit(known_truth):
     assert min(p["psnr"] for p in v.metrics["pairs"]) >= 40
 
 
+@pytest.mark.parametrize("loss", ["cbrt", "relative"])
+def test_a_loss_that_reads_the_floors_fits_every_texel_as_fit_does(small_lambert, loss):
+    """The texels' loss floors are computed where the loss reads them (``losses.READS_FLOOR``; the log loss's fit_btf
+    leaves them out): under those losses each texel's loss equals ``fit``'s of the texel."""
+    btf = brdffit.load_btf(small_lambert, tile=2)
+    maps = brdffit.fit_btf(btf, "lambert", loss=loss, progress=False)
+    assert maps.converged.all()
+    for r in range(4):
+        for c in range(4):
+            single = brdffit.fit(btf.texel(r, c), "lambert", loss=loss)
+            assert abs(maps.loss[r, c] - single.loss_value) <= 1e-6 * single.loss_value, (r, c)
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(len(RGL_FILES) < 2, reason=NO_DATA)
 def test_mosaic_of_measured_materials(tmp_path):

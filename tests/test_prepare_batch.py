@@ -101,3 +101,38 @@ def test_the_accelerator_s_preparation_equals_the_host_s():
     v[1] = np.nan
     with pytest.raises(UsageError, match=r"^tile\[1\]: no valid samples"):
         prepare_values_device(jnp.asarray(v), wi, wo, np.ones(len(wi)), name="tile")
+
+
+def test_without_floors_everything_else_is_the_same():
+    """``floors=False`` (a BTF fitted under a loss that does not read the floors): the floors NaN, every other
+    field as with them."""
+    wi, wo = ubo_pairs()
+    values = np.random.default_rng(2).uniform(0.0, 2.0, (3, len(wi), 3))
+    values[1, 10] = np.nan
+    with_floors = prepare_values(values.copy(), wi, wo, np.ones(len(wi)))
+    without = prepare_values(values.copy(), wi, wo, np.ones(len(wi)), floors=False)
+    assert np.isnan(without.floor).all() and np.isfinite(with_floors.floor).all()
+    for field, a, b in zip(with_floors._fields[:-1], with_floors[:-1], without[:-1]):
+        np.testing.assert_array_equal(a, b, err_msg=field)
+
+
+@pytest.mark.parametrize("loss", ["l2", "cosine_l2", "log", "cbrt", "relative"])
+def test_the_losses_that_read_the_floor_are_those_declared(loss):
+    """``losses.READS_FLOOR`` holds exactly the losses whose residual, reference transform or linearised row weights
+    change with the floor: the others' are the same with a NaN floor (what ``prepare_values(floors=False)`` leaves)."""
+    import jax.numpy as jnp
+
+    from brdffit.fitting import losses as L
+
+    rng = np.random.default_rng(3)
+    f, ref = rng.uniform(0.0, 2.0, (50, 3)), rng.uniform(0.0, 2.0, (50, 3))
+    cos_i, sqrt_w = rng.uniform(0.1, 1.0, (50, 1)), np.full((50, 1), 0.1)
+
+    def terms(floor):
+        floor = jnp.full((3,), floor)
+        g = L.reference_transform(loss, ref, cos_i, floor)
+        return [np.asarray(L.residual(loss, f, ref, cos_i, sqrt_w, floor)),
+                np.asarray(L.linearised_row_weights(loss, ref, cos_i, floor)), None if g is None else np.asarray(g)]
+
+    same = all(a is None and b is None or np.array_equal(a, b) for a, b in zip(terms(0.01), terms(np.nan)))
+    assert same == (loss not in L.READS_FLOOR)

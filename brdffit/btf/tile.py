@@ -112,6 +112,7 @@ def load_tiles(btf: BTF, tiles, mdl, options):
     tiles in a thread overlaps their transfer with the current solve."""
     import jax
 
+    from ..fitting.losses import READS_FLOOR
     from ..fitting.problem import data_unit, prepare_values, prepare_values_device
     from ..grid import ubo_pairs
 
@@ -129,7 +130,10 @@ def load_tiles(btf: BTF, tiles, mdl, options):
         values = np.empty((int(offsets[-1]), N_PAIRS, btf.channels), np.float32)
         for t, s, e in zip(tiles, offsets[:-1], offsets[1:]):
             btf.tile_values(t, out=values[s:e])
-        data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True)
+        # The loss floors only where the loss reads them (not the default log loss's): their mean of |values|
+        # is a twelfth of a texel's CPU time.
+        data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True,
+                              floors=options.loss in READS_FLOOR)
     del values
     # The unit (``problem.data_unit``: 1 but for a loss a unit only rescales, on values far from
     # reflectance's range): the driver solves in it and gives the maps back in the BTF's.

@@ -36,6 +36,10 @@ import jax.numpy as jnp
 
 from .._fit_defaults import LOSSES  # noqa: F401 (re-exported)
 
+#: The losses whose residual reads the loss floor (``Data.floor``): the others ignore it, so a batch fitted with one
+#: of those need not compute it (``problem.prepare_values(..., floors=False)``: a BTF's texels).
+READS_FLOOR = ("cbrt", "relative")
+
 #: Smoothing width of the cube root at zero, relative to ``floor`` (1 % of the mean |f_ref|):
 #: 1e-6 of the mean value.
 CBRT_EPS = 1e-4
