@@ -51,7 +51,8 @@ def main() -> None:
     rng = np.random.default_rng(0)
     starts = np.clip(fitted.v * (1 + 0.03 * rng.standard_normal(fitted.v.shape)), space.lo, space.hi)
     round_stage = jax.jit(stages.round_stage(objective_of(model, o.loss), "lm", o.rtol, o.atol, o.max_steps, True, 1))
-    call = ((jnp.asarray(starts), np.full(len(starts), START_DAMPING)), data, jnp.asarray(space.lo), jnp.asarray(space.hi),
+    dampings = np.full(len(starts), START_DAMPING)  # the first round's lanes: their first step's damping
+    call = ((jnp.asarray(starts), dampings), data, jnp.asarray(space.lo), jnp.asarray(space.hi),
             np.asarray(space.free, bool), np.int32(o.max_steps))
     programs = {"XLA default": round_stage.lower(*call).compile(),
                 "brdffit's": round_stage.lower(*call).compile(compiler_options=options)}

@@ -49,11 +49,11 @@ _HELD_GUARD = threading.Lock()
 #: wrote its result). So nothing is committed once this is set, whatever became of the exception.
 STOP_REQUESTED = threading.Event()
 #: What this process writes, for the ``brdffit`` executable's Ctrl-C (:func:`remove_this_runs_outputs`):
-#: the targets it holds a lock on (absolute path -> lock file) and the results it has committed.
+#: the targets it holds a lock on (absolute paths; their lock files are ``_LOCKS``) and the results it has committed.
 #: ``_GUARD`` is held while either changes and for a whole commit, so that an interrupt handled in
 #: another thread sees a result either not yet committed or committed and listed, never half-way.
 _GUARD = threading.RLock()
-_RESERVED: dict[str, Path] = {}
+_RESERVED: set[str] = set()
 #: Lock files this process has opened and not yet closed (descriptor -> path), listed in the same step as
 #: they are made (under ``_GUARD``): an interrupt between making one and listing its target in
 #: ``_RESERVED`` (seen in CI: Ctrl-C as the lock was being taken) still finds it.
@@ -220,13 +220,13 @@ def reserve(path: str | os.PathLike, force: bool = False, folder: bool | None = 
         check_target(path, force, folder)  # again, now that no other run can change it
         with _HELD_GUARD, _GUARD:
             _HELD[key] = 1
-            _RESERVED[key] = lock
+            _RESERVED.add(key)
         try:
             yield path
         finally:
             with _HELD_GUARD, _GUARD:
                 _HELD.pop(key, None)
-                _RESERVED.pop(key, None)
+                _RESERVED.discard(key)
     finally:
         _release(fd, lock)
 

@@ -213,7 +213,7 @@ def handler_sees_this_test_alone(monkeypatch):
     next run in them failed: "the worker process on core 0 ended (exit status -9)")."""
     from brdffit import _files
 
-    for name, empty in (("_RESERVED", {}), ("_LOCKS", {}), ("_COMMITTED", []), ("_COMPLETING", set()),
+    for name, empty in (("_RESERVED", set()), ("_LOCKS", {}), ("_COMMITTED", []), ("_COMPLETING", set()),
                         ("_SCRATCH", []), ("_PROCESSES", [])):
         monkeypatch.setattr(_files, name, empty)
 

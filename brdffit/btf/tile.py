@@ -8,9 +8,10 @@ later texel starts from the mean of the results of its nearest texels fitted in 
 agree (``AGREE``), else from the one of them whose result fits the texel's data best (ranked on the
 grid's rows, as the grid's points are), without the grid; a texel that does not converge so is
 fitted again from the grid. A mean of agreeing neighbours lies near the texel's optimum: its first step
-is damped less than a guess's (``driver.solve(near=True)``, ``_fit_defaults.NEAR_START_DAMPING``). The mean of the surrounding results is nearer a smooth map's value
-than any one of them: a 64 x 64 ggx BTF's texels took 1.96 instead of 2.49 steps on average, 837
-instead of 685-721 texels/s on one core. Where they disagree the texel lies at an edge between
+is damped less than a guess's (``driver.solve(near=True)``, ``_fit_defaults.NEAR_START_DAMPING``).
+The mean of the surrounding results is nearer a smooth map's value than any one of them: a 64 x 64
+ggx BTF's texels took 1.96 instead of 2.49 steps on average, 837 instead of 685-721 texels/s on one
+core. Where they disagree the texel lies at an edge between
 materials, or in a texture that changes from texel to texel: the first of them, taken before,
 was often another material's (a 32 x 32 ggx BTF of four materials in 3 x 3 blocks: 2.85 -> 1.75
 steps a texel, 713 -> 802 texels/s on one core; in blocks of one texel 4.75 -> 3.45 steps,
@@ -131,7 +132,7 @@ def load_tiles(btf: BTF, tiles, mdl, options):
         for t, s, e in zip(tiles, offsets[:-1], offsets[1:]):
             btf.tile_values(t, out=values[s:e])
         # The loss floors only where the loss reads them (not the default log loss's): their mean of |values|
-        # is a twelfth of a texel's CPU time.
+        # is about 8 % of a texel's CPU time (``prepare_values``).
         data = prepare_values(values, wi, wo, np.ones(len(wi)), name=name, own=True,
                               floors=options.loss in READS_FLOOR)
     del values

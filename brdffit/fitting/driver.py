@@ -87,10 +87,11 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
     points (``grid``); without the grid a fit's candidates are ranked where they differ (on the grid's
     rows, as its points are), and the best starts it. ``near``: the given starts lie near their fits' optima (a
     BTF's fitted neighbours' results): lm's first step from a fit's one start is nearly Gauss-Newton's
-    (``_fit_defaults.NEAR_START_DAMPING``; the grid's points, and the best of several that differ, are guesses). ``results``: also every metric and
-    J^T J (for FitResults; else the loss alone). ``check_given``: a fit from a given start is also solved from the default start, and marked
-    not converged when it ends far above that (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with
-    the share of the fits whose solves ended, as they end."""
+    (``_fit_defaults.NEAR_START_DAMPING``; the grid's points, and the best of several that differ, are guesses).
+    ``results``: also every metric and J^T J (for FitResults; else the loss alone). ``check_given``: a fit from a
+    given start is also solved from the default start, and marked not converged when it ends far above that
+    (``GIVEN_START_FACTOR``). ``progress(fraction)``: called with the share of the fits whose solves ended, as
+    they end."""
     model = space.model
     fits = np.arange(int(np.shape(data.ref)[0])) if fits is None else np.asarray(fits)
     n, P = len(fits), model.n_free
@@ -115,7 +116,8 @@ def solve(space: ParameterSpace, options: FitOptions, data: Data, *, unit: float
         # several that differ (a texel between materials) is a guess.
         damping = np.where(near & ~differ, NEAR_START_DAMPING, START_DAMPING)
     k = candidates.shape[1]
-    r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress, damping=damping)  # k is 1 without the grid
+    # One damping per fit, and so per lane: without the grid k is 1.
+    r = run.solve(candidates.reshape(n * k, P), np.repeat(fits, k), progress, damping=damping)
     best = _best_of(r.loss, n, k)
     v, loss, code, steps = r.v[best], r.loss[best], r.code[best], r.steps[best].copy()
     start, start_loss, jtj = candidates.reshape(n * k, P)[best], r.start_loss[best], r.jtj[best]

@@ -80,7 +80,9 @@ def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max
         data = in_solve_dtype(data)
         consts = objective.constants(data, geometry)
         if solver in RESUMABLE:
-            return solve(v, data, lo, hi, free, consts, *((None, steps, then) if first else (then, steps)))
+            if first:
+                return solve(v, data, lo, hi, free, consts, steps=steps, damping=then)
+            return solve(v, data, lo, hi, free, consts, resume=then, steps=steps)
         return solve(v, data, lo, hi, free, consts)
 
     def run(lane, data, lo, hi, free, steps):
