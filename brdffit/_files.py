@@ -356,6 +356,18 @@ def remove_scratch(path: Path) -> None:
             _SCRATCH.remove(path)
 
 
+@contextlib.contextmanager
+def scratch(prefix: str):
+    """A scratch folder (:func:`scratch_dir`) for a ``with`` block, removed after it. In place of
+    ``tempfile.TemporaryDirectory``, whose folder a Ctrl-C of the executable (which ends the process at
+    once: no ``with`` block ends) would leave behind."""
+    path = scratch_dir(prefix)
+    try:
+        yield path
+    finally:
+        remove_scratch(path)
+
+
 def start_process(argv: list[str], **popen_options):
     """``subprocess.Popen(argv, **popen_options)``, a helper process of this run: in a session of
     its own (a terminal's Ctrl-C reaches brdffit, which stops it before removing its scratch

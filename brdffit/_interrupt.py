@@ -4,7 +4,7 @@
 ``brdffit`` executable (:func:`is_the_executable`), before the package imports anything else, so
 that a Ctrl-C while NumPy or JAX import is handled as one later on; ``cli.entry`` installs it too
 (``python -m brdffit``). This module imports only os, signal and sys before the handler is in
-place (threading after); a Ctrl-C before that (the package's first lines) is answered by the
+place (tempfile and threading after); a Ctrl-C before that (the package's first lines) is answered by the
 executable's own module, ``brdffit_main.py`` beside the package, with the same line and 130, so what is
 left is the interpreter's own start-up, where the signal is Python's (see ``brdffit_main.py``: nothing
 of brdffit ran, nothing written); it reaches
@@ -67,6 +67,7 @@ def end_process_on_interrupt() -> None:
         return
     signal.signal(signal.SIGINT, _nothing)  # the watcher acts; a C-level handler is needed
     _WATCHING.append(True)
+    _look_at_the_temporary_folder()
     import threading
 
     threading.Thread(target=_watch, args=(read_end,), name="brdffit-interrupt", daemon=True).start()
@@ -74,6 +75,19 @@ def end_process_on_interrupt() -> None:
 
 def _nothing(signum, frame) -> None:
     pass
+
+
+def _look_at_the_temporary_folder() -> None:
+    """Python's first ``tempfile`` call of a process finds the temporary folder by writing a probe file
+    there (a name of 8 random characters) and removing it; a Ctrl-C in between, ending the process at
+    once, left the file behind (seen in CI). Made here, before the watcher runs, a Ctrl-C waits in the
+    pipe until it is done; later calls reuse the folder found. Where there is none to be found, the
+    command that needs one says so."""
+    import contextlib
+    import tempfile
+
+    with contextlib.suppress(OSError):
+        tempfile.gettempdir()
 
 
 def _watch(read_end: int) -> None:

@@ -51,6 +51,27 @@ def test_space_named_zip_of_jpegs_matches_its_folder(tmp_path):
     np.testing.assert_allclose(m.values, got.reshape(-1, UBO_SIZE * UBO_SIZE, 3).mean(axis=0), rtol=1e-5)
 
 
+def test_zip_of_exrs_reads_as_its_folder_and_leaves_nothing_in_tmpdir(tmp_path, monkeypatch):
+    """The OpenEXR binding reads files only: a zip's EXR members go through a scratch folder of the run (which the
+    executable's Ctrl-C removes), emptied as they are read and removed when the archive is closed."""
+    import tempfile
+
+    model, maps = _truth(3, 4, seed=3)
+    zpath = gen.write_model_btf(tmp_path / "ubo.zip", model, maps, archive=True)
+    folder = tmp_path / "unpacked"
+    with zipfile.ZipFile(zpath) as z:
+        assert all(n.endswith(".exr") for n in z.namelist())
+        z.extractall(folder)
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    btf = brdffit.load_btf(zpath, tile=2, cache_dir=tmp_path / "cache")
+    assert list(tmp.iterdir()) == []
+    again = brdffit.load_btf(folder, tile=2, cache_dir=tmp_path / "cache2")
+    for t in range(btf.n_tiles):
+        np.testing.assert_array_equal(btf.tile_values(t), again.tile_values(t))
+
+
 def test_hdr_zip_with_per_view_folders(tmp_path):
     model, maps = _truth(4, 3, seed=2)
     zpath = gen.write_model_btf(tmp_path / "atrium.zip", model, maps, format="hdr", spaces=True, per_view=True,

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import remove_scratch, scratch_dir
 from ..errors import UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..io.images import direction_name, linear_to_srgb
@@ -132,10 +133,8 @@ def _write_tables(path, tables, *, fmt, noise, seed, spaces, per_view, exposure,
     rng = np.random.default_rng(seed)
     ext = "jpg" if fmt == "jpg" else fmt
     if archive:
-        import tempfile
-
         zf = zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED)
-        scratch = Path(tempfile.mkdtemp(prefix="brdffit-gen-"))
+        scratch = scratch_dir("brdffit-gen-")
     else:
         path.mkdir(parents=True, exist_ok=True)
     try:
@@ -158,9 +157,7 @@ def _write_tables(path, tables, *, fmt, noise, seed, spaces, per_view, exposure,
     finally:
         if archive:
             zf.close()
-            import shutil
-
-            shutil.rmtree(scratch, ignore_errors=True)
+            remove_scratch(scratch)
     return path
 
 

@@ -31,14 +31,13 @@ import hashlib
 import io
 import json
 import os
-import shutil
-import tempfile
 import weakref
 import zipfile
 from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from .._files import remove_scratch, scratch_dir
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..io import images as _images
@@ -195,6 +194,7 @@ class _Zip:
 
     def __init__(self, path: Path):
         self.path = path
+        self._scratch: Path | None = None  # where an EXR member is read from (made at the first)
         try:
             self.zf = zipfile.ZipFile(path)
         except (zipfile.BadZipFile, OSError) as exc:
@@ -237,11 +237,15 @@ class _Zip:
 
     def read(self, key, srgb: bool) -> np.ndarray:
         name = self.files[key]
-        if name.lower().endswith(".exr"):  # the OpenEXR binding reads files only
-            with tempfile.TemporaryDirectory() as d:
-                f = Path(d) / "image.exr"
+        if name.lower().endswith(".exr"):  # the OpenEXR binding reads files only: through a scratch folder
+            if self._scratch is None:
+                self._scratch = scratch_dir("brdffit-zip-")
+            f = self._scratch / f"pair-{key[0]}-{key[1]}.exr"  # (light, view): unique, should reads overlap
+            try:
                 f.write_bytes(self.zf.read(name))
                 return _images.read_image(f, srgb=srgb)
+            finally:
+                f.unlink(missing_ok=True)
         with self.zf.open(name) as fh:
             data = io.BytesIO(fh.read())
         data.name = name
@@ -249,6 +253,9 @@ class _Zip:
 
     def close(self):
         self.zf.close()
+        if self._scratch is not None:
+            remove_scratch(self._scratch)
+            self._scratch = None
 
 
 def _open(path: Path):
@@ -308,7 +315,7 @@ def load_btf(
         first = _first_image(src, srgb, region, step)
         h, w, c = first.shape
         if cache_dir is None:
-            folder = Path(tempfile.mkdtemp(prefix="brdffit-btf-"))
+            folder = scratch_dir("brdffit-btf-")  # a Ctrl-C of the executable removes it too
             owner = _TempOwner(folder)
         else:
             folder = Path(cache_dir)
@@ -354,7 +361,7 @@ def load_btf(
             done_marker.write_text(json.dumps({"meta": meta}))
     except BaseException:
         if cache_dir is None and "folder" in locals():
-            shutil.rmtree(folder, ignore_errors=True)
+            remove_scratch(folder)
         if "tmp" in locals() and Path(tmp).exists():
             Path(tmp).unlink()
         raise
@@ -384,11 +391,11 @@ def _first_image(src, srgb, region, step) -> np.ndarray:
 
 
 class _TempOwner:
-    """Removes a temporary cache folder when the last BTF using it is gone."""
+    """Removes a temporary cache folder (a scratch folder of the run) when the last BTF using it is gone."""
 
     def __init__(self, folder: Path):
         self.folder = folder
-        self._finalizer = weakref.finalize(self, shutil.rmtree, str(folder), True)
+        self._finalizer = weakref.finalize(self, remove_scratch, folder)
 
 
 def _decode(src, key, srgb, region, step) -> np.ndarray:

@@ -21,11 +21,11 @@ holds the maps' ``extras`` as JSON text.
 from __future__ import annotations
 
 import json
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .._files import scratch
 from .formats import MapsFormat
 
 #: Parameter of ``blender:principled`` -> the Principled BSDF input its map feeds.
@@ -45,7 +45,7 @@ def blend_bytes(model, arrays: dict[str, np.ndarray], name: str, extras: dict) -
     json.dumps(extras)  # what cannot be stored fails here, before Blender runs
     height, width = next(iter(arrays.values())).shape[:2]
     means = {p.name: np.clip(arrays[p.name].mean(axis=(0, 1)), p.lower, p.upper) for p in model.params}
-    with tempfile.TemporaryDirectory(prefix="brdffit-maps-") as tmp:
+    with scratch("brdffit-maps-") as tmp:
         textures = {}
         for param, socket in SOCKETS.items():
             a = arrays[param]
