@@ -62,8 +62,8 @@ _COMMITTED: list[Path] = []
 #: Targets whose commit completes a result of several files (:func:`complete_with`): once one is
 #: committed, everything committed before it stays, whatever interrupts the run afterwards.
 _COMPLETING: set[Path] = set()
-#: This run's scratch folders (:func:`scratch_dir`) and helper processes (:func:`start_process`),
-#: stopped and removed by :func:`remove_this_runs_outputs` (also under ``_GUARD``).
+#: This run's scratch folders (:func:`scratch_dir`) and files (:func:`scratch_file`) and helper processes
+#: (:func:`start_process`), stopped and removed by :func:`remove_this_runs_outputs` (also under ``_GUARD``).
 _SCRATCH: list[Path] = []
 _PROCESSES: list = []
 
@@ -327,7 +327,7 @@ def remove_this_runs_outputs(timeout: float = 10.0) -> None:
         with contextlib.suppress(Exception):
             proc.wait(timeout=timeout)
     for path in _SCRATCH:
-        shutil.rmtree(path, ignore_errors=True)
+        _remove(path)
     for path in _COMMITTED:
         _remove(path)
     for key in list(_RESERVED):
@@ -353,6 +353,20 @@ def remove_scratch(path: Path) -> None:
     with _GUARD:
         shutil.rmtree(path, ignore_errors=True)
         with contextlib.suppress(ValueError):
+            _SCRATCH.remove(path)
+
+
+@contextlib.contextmanager
+def scratch_file(path: Path):
+    """For a ``with`` block that writes ``path`` and removes it or renames it away before it ends (a BTF's
+    tile cache written beside its final name): the file is listed as this run's scratch while the block
+    runs, so that a Ctrl-C of the executable removes it too."""
+    with _GUARD:
+        _SCRATCH.append(path)
+    try:
+        yield path
+    finally:
+        with _GUARD, contextlib.suppress(ValueError):
             _SCRATCH.remove(path)
 
 

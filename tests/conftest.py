@@ -80,6 +80,19 @@ def interrupted_before_brdffit_ran(code: int, err: str) -> bool:
     return code in (-2, 1) and (err == "" or err.rstrip().endswith("KeyboardInterrupt")) and not ours
 
 
+@pytest.fixture
+def handler_sees_this_test_alone(monkeypatch):
+    """The executable's Ctrl-C handler (``_files.remove_this_runs_outputs``), called in this test process, sees only
+    what the test lists itself: it kills every helper process and removes every scratch folder and result this
+    process listed, so a BTF's worker processes kept by a test that ran before in this process died with it (the
+    next run in them failed: "the worker process on core 0 ended (exit status -9)")."""
+    from brdffit import _files
+
+    for name, empty in (("_RESERVED", set()), ("_LOCKS", {}), ("_COMMITTED", []), ("_COMPLETING", set()),
+                        ("_SCRATCH", []), ("_PROCESSES", [])):
+        monkeypatch.setattr(_files, name, empty)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     d = data_dir()

@@ -205,19 +205,6 @@ def test_ctrl_c_at_a_fixed_moment_ends_at_once_with_nothing_written(tmp_path, mo
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.fixture
-def handler_sees_this_test_alone(monkeypatch):
-    """The executable's Ctrl-C handler (``_files.remove_this_runs_outputs``), called in this test process, sees only
-    what the test lists itself: it kills every helper process and removes every scratch folder and result this
-    process listed, so a BTF's worker processes kept by a test that ran before in this process died with it (the
-    next run in them failed: "the worker process on core 0 ended (exit status -9)")."""
-    from brdffit import _files
-
-    for name, empty in (("_RESERVED", set()), ("_LOCKS", {}), ("_COMMITTED", []), ("_COMPLETING", set()),
-                        ("_SCRATCH", []), ("_PROCESSES", [])):
-        monkeypatch.setattr(_files, name, empty)
-
-
 def test_an_interrupt_after_the_commit_takes_the_result_back(tmp_path, handler_sees_this_test_alone):
     """The executable's Ctrl-C handler removes what this command wrote, a committed result too (the
     old handler reported 130 with the result written when the signal came after the commit)."""

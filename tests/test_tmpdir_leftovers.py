@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from conftest import deliverable_sigint  # noqa: E402
 
@@ -54,23 +56,36 @@ def test_ctrl_c_during_pythons_probe_of_the_temporary_folder_leaves_nothing(tmp_
     assert sorted(p.name for p in tmp.iterdir()) == []
 
 
-def test_ctrl_c_while_fit_btf_reads_leaves_no_btf_cache(full_folder, tmp_path):
-    """``brdffit fit-btf`` without ``--cache-dir`` keeps the BTF's tiles in a folder of TMPDIR (a 400 x 400 BTF's
-    takes 12 GB): an interrupt while it is read left it there (before: ``brdffit-btf-*`` with the cache file)."""
+def _ctrl_c_fit_btf_once(folder: Path, tmp_path: Path, appeared, *options: str) -> None:
+    """``brdffit fit-btf FOLDER`` with TMPDIR of its own, Ctrl-C as soon as ``appeared(tmp)``; it ends 130."""
     tmp, out = tmp_path / "tmp", tmp_path / "out"
     tmp.mkdir()
-    p = subprocess.Popen([sys.executable, "-m", "brdffit", "fit-btf", str(full_folder), "-m", "lambert", "-o", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**ENV, "TMPDIR": str(tmp)},
-                         preexec_fn=deliverable_sigint)
+    p = subprocess.Popen([sys.executable, "-m", "brdffit", "fit-btf", str(folder), "-m", "lambert", "-o", str(out),
+                          *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env={**ENV, "TMPDIR": str(tmp)}, preexec_fn=deliverable_sigint)
     deadline = time.monotonic() + 120
-    while not any(tmp.glob("brdffit-btf-*")) and p.poll() is None and time.monotonic() < deadline:
+    while not appeared(tmp) and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)
-    assert p.poll() is None, "the run ended before its BTF cache appeared"
+    assert p.poll() is None, "the run ended before the moment awaited"
     p.send_signal(signal.SIGINT)
     code = p.wait(timeout=60)
     err = p.stderr.read()
     assert (code, err) == (130, "brdffit: interrupted\n")
     assert sorted(str(x.relative_to(tmp)) for x in tmp.rglob("*")) == []
+
+
+def test_ctrl_c_while_fit_btf_reads_leaves_no_btf_cache(full_folder, tmp_path):
+    """``brdffit fit-btf`` without ``--cache-dir`` keeps the BTF's tiles in a folder of TMPDIR (a 400 x 400 BTF's
+    takes 12 GB): an interrupt while it is read left it there (before: ``brdffit-btf-*`` with the cache file)."""
+    _ctrl_c_fit_btf_once(full_folder, tmp_path, lambda tmp: any(tmp.glob("brdffit-btf-*")))
+
+
+def test_ctrl_c_while_fit_btf_reads_into_a_cache_dir_leaves_no_part_file(full_folder, tmp_path):
+    """With ``--cache-dir`` the cache is written beside its final name (``btf-*.partPID``, renamed when whole): an
+    interrupt while it is read left that file (a whole BTF's size) for good, as the next run writes its own."""
+    cache = tmp_path / "cache"
+    _ctrl_c_fit_btf_once(full_folder, tmp_path, lambda tmp: any(cache.glob("*.part*")), "--cache-dir", str(cache))
+    assert sorted(p.name for p in cache.iterdir()) == []
 
 
 #: tempfile's calls that make a named entry; ``dir=`` inside a scratch folder is the caller's to remove with it.
@@ -91,3 +106,40 @@ def test_only_the_files_module_makes_entries_in_the_temporary_folder():
                 if name in MAKERS and not any(k.arg == "dir" for k in node.keywords):
                     found.append(f"{path.relative_to(REPO)}:{node.lineno} {name}")
     assert found == []
+
+
+@pytest.mark.parametrize("what", ["tile", "run.json"])
+def test_the_interrupt_handler_removes_a_tile_file_being_written(tmp_path, monkeypatch, what,
+                                                                  handler_sees_this_test_alone):
+    """The executable's Ctrl-C handler (``remove_this_runs_outputs``, then the process ends at once) while a run writes
+    a tile's file or its ``run.json`` under a hidden temporary name: that file is removed too (before, it stayed in
+    ``DIR/tiles`` for good: a resumed run writes its own)."""
+    import numpy as np
+
+    from brdffit import _files
+    from brdffit.btf import run
+
+    def handler_runs_here():
+        _files.remove_this_runs_outputs(timeout=1.0)
+        _files._GUARD.release()  # the handler would end the process here, holding it
+        raise SystemExit(130)
+
+    if what == "tile":
+        real_savez = np.savez
+
+        def savez(f, **arrays):
+            real_savez(f, **arrays)
+            f.flush()
+            handler_runs_here()
+
+        monkeypatch.setattr(run.np, "savez", savez)
+    else:
+        real_replace = os.replace
+        monkeypatch.setattr(run.os, "replace", lambda a, b: handler_runs_here() if a.name.startswith(".run.json")
+                            else real_replace(a, b))
+    with pytest.raises(SystemExit):
+        if what == "tile":
+            run.save_tile(tmp_path, 3, {"loss": np.zeros((4, 4))})
+        else:
+            run.write_run(tmp_path, {"model": "lambert"})
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -37,7 +37,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from .._files import remove_scratch, scratch_dir
+from .._files import remove_scratch, scratch_dir, scratch_file
 from ..errors import InputError, UsageError
 from ..grid import UBO_SIZE, ubo_pairs
 from ..io import images as _images
@@ -334,30 +334,33 @@ def load_btf(
             meta.update(json.loads(done_marker.read_text()).get("meta", {}))
         else:
             tmp = cache.with_suffix(f".part{os.getpid()}")
-            arr = np.memmap(tmp, dtype=np.float32, mode="w+", shape=shape)
             light_cos = ubo_pairs()[0][:, 2]
             buf = np.zeros((batch, nr * tile, nc * tile, c), np.float32)
             from ..io import PROGRESS
 
-            token = PROGRESS.set(bool(progress))
-            try:
-                for k in _images._with_progress(iter(range(N_PAIRS)), N_PAIRS, f"reading {path.name}"):
-                    img = first if k == 0 else _decode(src, keys[k], srgb, region, step)
-                    if img.shape != (h, w, c):
-                        raise InputError(src.label(keys[k]), f"has shape {img.shape}, {src.label(keys[0])} has {(h, w, c)}")
-                    factor = float(scale) / (light_cos[k] if includes_cos else 1.0)
-                    buf[k % batch, :h, :w] = img * factor
-                    if k % batch == batch - 1 or k == N_PAIRS - 1:
-                        k0 = k - k % batch
-                        n = k - k0 + 1
-                        # (n, nr*t, nc*t, c) -> (nr, nc, t*t, n, c): per tile and texel, a run of n pairs
-                        blocks = buf[:n].reshape(n, nr, tile, nc, tile, c).transpose(1, 3, 2, 4, 0, 5)
-                        arr[:, :, k0 : k0 + n] = blocks.reshape(nr * nc, tile * tile, n, c)
-            finally:
-                PROGRESS.reset(token)
-            arr.flush()
-            del arr
-            os.replace(tmp, cache)
+            # listed while it is written, so that a Ctrl-C of the executable removes it (in cache_dir too)
+            with scratch_file(tmp):
+                arr = np.memmap(tmp, dtype=np.float32, mode="w+", shape=shape)
+                token = PROGRESS.set(bool(progress))
+                try:
+                    for k in _images._with_progress(iter(range(N_PAIRS)), N_PAIRS, f"reading {path.name}"):
+                        img = first if k == 0 else _decode(src, keys[k], srgb, region, step)
+                        if img.shape != (h, w, c):
+                            raise InputError(src.label(keys[k]),
+                                             f"has shape {img.shape}, {src.label(keys[0])} has {(h, w, c)}")
+                        factor = float(scale) / (light_cos[k] if includes_cos else 1.0)
+                        buf[k % batch, :h, :w] = img * factor
+                        if k % batch == batch - 1 or k == N_PAIRS - 1:
+                            k0 = k - k % batch
+                            n = k - k0 + 1
+                            # (n, nr*t, nc*t, c) -> (nr, nc, t*t, n, c): per tile and texel, a run of n pairs
+                            blocks = buf[:n].reshape(n, nr, tile, nc, tile, c).transpose(1, 3, 2, 4, 0, 5)
+                            arr[:, :, k0 : k0 + n] = blocks.reshape(nr * nc, tile * tile, n, c)
+                finally:
+                    PROGRESS.reset(token)
+                arr.flush()
+                del arr
+                os.replace(tmp, cache)
             done_marker.write_text(json.dumps({"meta": meta}))
     except BaseException:
         if cache_dir is None and "folder" in locals():

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import scratch_file
 from ..errors import UsageError
 
 RUN_FILE = "run.json"
@@ -45,8 +46,9 @@ def read_run(folder: Path) -> dict | None:
 def write_run(folder: Path, run: dict) -> None:
     target = Path(folder) / RUN_FILE
     tmp = target.with_name(f".{RUN_FILE}.{socket.gethostname()}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(run))
-    os.replace(tmp, target)
+    with scratch_file(tmp):  # a Ctrl-C of the executable removes it
+        tmp.write_text(json.dumps(run))
+        os.replace(tmp, target)
 
 
 def save_tile(folder: Path, t: int, arrays: dict, run: dict | None = None) -> bool:
@@ -57,9 +59,10 @@ def save_tile(folder: Path, t: int, arrays: dict, run: dict | None = None) -> bo
         return False
     target = tile_file(folder, t)
     tmp = target.with_name(f".{target.name}.{socket.gethostname()}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    os.replace(tmp, target)
+    with scratch_file(tmp):  # a Ctrl-C of the executable removes it
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, target)
     return True
 
 
