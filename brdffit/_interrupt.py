@@ -68,9 +68,15 @@ def end_process_on_interrupt() -> None:
     signal.signal(signal.SIGINT, _nothing)  # the watcher acts; a C-level handler is needed
     _WATCHING.append(True)
     _look_at_the_temporary_folder()
+    # The line goes to the standard error of now: while a reader captures what a C library writes to
+    # descriptor 2 (io._common.native_stderr_captured), a line written there was lost with the capture.
+    try:
+        stderr = os.dup(2)
+    except OSError:  # no standard error (closed): nothing to say it on
+        stderr = -1
     import threading
 
-    threading.Thread(target=_watch, args=(read_end,), name="brdffit-interrupt", daemon=True).start()
+    threading.Thread(target=_watch, args=(read_end, stderr), name="brdffit-interrupt", daemon=True).start()
 
 
 def _nothing(signum, frame) -> None:
@@ -90,9 +96,12 @@ def _look_at_the_temporary_folder() -> None:
         tempfile.gettempdir()
 
 
-def _watch(read_end: int) -> None:
+def _watch(read_end: int, stderr: int) -> None:
     while signal.SIGINT not in os.read(read_end, 64):
         pass
     _stop_this_run()
-    os.write(2, b"brdffit: interrupted\n")
+    try:
+        os.write(stderr, b"brdffit: interrupted\n")
+    except OSError:
+        pass
     os._exit(EXIT_INTERRUPTED)

@@ -550,3 +550,24 @@ def test_export_takes_its_output_before_converting(tmp_path, monkeypatch, capsys
     assert main(["export", str(ggx), "--to", "gltf:metallic_roughness", "-o", out]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cannot write here" in err and "Traceback" not in err
+
+
+#: A child that sends itself Ctrl-C while a reader captures what C libraries write to descriptors 1 and 2.
+CTRL_C_WHILE_NATIVE_OUTPUT_IS_CAPTURED = """
+import os, signal, time
+from brdffit import _interrupt
+from brdffit.io._common import native_stderr_captured
+
+_interrupt.end_process_on_interrupt()
+with native_stderr_captured():
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(30)  # the read goes on: the handler ends the process
+"""
+
+
+def test_the_interrupt_line_is_not_lost_in_a_capture_of_native_output():
+    """Seen in a stress run of test_output_safety: exit 130 with nothing on standard error, the Ctrl-C having come
+    while the EXR reader captured descriptor 2 (the handler's line went into the capture, lost with the process)."""
+    r = subprocess.run([sys.executable, "-c", CTRL_C_WHILE_NATIVE_OUTPUT_IS_CAPTURED], capture_output=True, text=True,
+                       env=ENV, timeout=120, preexec_fn=deliverable_sigint)
+    assert (r.returncode, r.stderr, r.stdout) == (130, "brdffit: interrupted\n", "")

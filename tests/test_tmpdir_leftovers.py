@@ -143,3 +143,4 @@ def test_the_interrupt_handler_removes_a_tile_file_being_written(tmp_path, monke
         else:
             run.write_run(tmp_path, {"model": "lambert"})
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
