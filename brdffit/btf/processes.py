@@ -45,10 +45,11 @@ from pathlib import Path
 
 from ..errors import InputError, UsageError
 
-#: Texels a run fits at least for ``processes=None`` to start workers: their start (Python, JAX, the compiled
-#: programs from the disk cache) takes about 1.4 s, which a 64 x 64 ggx BTF does not repay on 2 cores
-#: (``bench_btf.py --size 64 --one-process``: first run 730 texels/s in workers, 855 in one process; warm
-#: 1,034 against 890); about 8,000 texels do. With more cores the workers gain more (XLA's pool is wider).
+#: Texels a run fits at least for ``processes=None`` to start workers: their start (Python and JAX 0.55 s, the
+#: compiled programs from the disk cache 0.25 s, each worker on its core) is repaid by their faster solves only
+#: from some thousands of texels on 2 cores. ``bench_btf.py --size S --processes 2 --one-process``, ggx, first
+#: runs in workers / in one process: 64 x 64 1,441-1,468 / 1,687-1,720 texels/s; 80 x 80 1,688 / 1,616; 96 x 96
+#: 2,060 / 1,689 (benchmarks/README.md). With more cores the workers gain more (XLA's pool is wider).
 AUTO_MIN_TEXELS = 8192
 #: Memory one worker is given room for when ``processes=None`` chooses how many (at most the memory available
 #: now over this): measured peaks 361 MB (lambert, a 400 x 400 BTF in tiles of 16) to 630 MB (ggx, 64 x 64).
