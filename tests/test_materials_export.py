@@ -219,6 +219,13 @@ def test_cli_export_to_prints_and_stores_the_conversion_error(tmp_path, capsys):
     ("mitsuba:roughplastic", PLASTIC, ["-o", "x.blend"], "holds a blender:principled material, and this fit is "
                                                          "mitsuba:roughplastic: convert it with --to blender:principled"),
     ("ggx", GGX, ["--to", "no_such_model", "-o", "x.xml"], "unknown model"),
+    # an unknown --to is named as such whatever the format (it was "... and this fit is no_such_model")
+    ("ggx", GGX, ["--to", "no_such_model", "-o", "x.mtlx"], "--to no_such_model: unknown model 'no_such_model'"),
+    ("ggx", GGX, ["--to", "no_such_model", "-o", "x.glb"], "--to no_such_model: unknown model 'no_such_model'"),
+    # a --to the format does not hold is the --to's model, not the fit's
+    ("ggx", GGX, ["--to", "mitsuba:roughplastic", "-o", "x.glb"],
+     "holds a gltf:metallic_roughness material, not mitsuba:roughplastic (--to): convert it with --to "
+     "gltf:metallic_roughness"),
     ("gltf:metallic_roughness", {**GLTF, "metallic": 1.5}, ["-o", "x.glb"],
      "'metallic' = [1.5] lies outside its bounds of gltf:metallic_roughness [0, 1]"),
 ])

@@ -43,17 +43,13 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     ``brdffit.fit`` as any measurement. The returned FitResult's ``options["converted_from"]`` holds
     the source model and the conversion error: ``rel_rmse`` and ``log_rmse`` of the converted BRDF
     against the source fit's on that grid (docs/fitting.md#fitting's definitions)."""
-    from .. import models
     from .._fit_defaults import LOSSES
     from ..fitting.driver import fit_measurements
     from ..fitting.options import FitOptions
     from ..grid import ubo_pairs
     from ..measurement import Measurement
 
-    try:
-        target = models.get(model)
-    except KeyError as exc:
-        raise UsageError(f"--to {model}: {exc.args[0] if exc.args else exc}") from None
+    target = _target(model)
     if target.name == fit.model.name:
         return fit
     wi, wo = ubo_pairs()
@@ -86,16 +82,28 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
                                options={**converted.options, "converted_from": error})
 
 
+def _target(model):
+    """The model a conversion asks for (``--to``), or one UsageError line naming it."""
+    from .. import models
+
+    try:
+        return models.get(model)
+    except KeyError as exc:
+        raise UsageError(f"--to {model}: {exc.args[0] if exc.args else exc}") from None
+
+
 def check_format(fit, path: str | os.PathLike, to: str | None = None, source=None) -> str:
     """The extension of ``path`` if its format (:mod:`.formats`) holds ``fit`` (converted to ``to``
     when given); else one ``UsageError`` line that says what would work. Called before any work.
     ``source`` (the fit file, if any) is the file an error about the fit's parameters names."""
     fmt = formats.for_path(path)
-    name = to if to is not None else fit.model.name
+    # an unknown --to is named as such first (the format's refusal would call it the fit's model)
+    name = _target(to).name if to is not None else fit.model.name
     if not fmt.holds("".join(str(name).split()).lower()):
         held = fmt.held()
-        raise UsageError(f"{path}: a {fmt.name} file holds a {' or '.join(held)} material, and this fit is "
-                         f"{name}: convert it with --to {held[0]} (brdffit.materials.export(fit, path, to={held[0]!r}))")
+        what = f"not {name} (--to)" if to is not None else f"and this fit is {name}"
+        raise UsageError(f"{path}: a {fmt.name} file holds a {' or '.join(held)} material, {what}: convert it with "
+                         f"--to {held[0]} (brdffit.materials.export(fit, path, to={held[0]!r}))")
     if to is None and fit.model.is_native:
         native_of(fit, source)  # parameters outside what the renderer accepts: refused before any work
     return Path(path).suffix.lower()
