@@ -36,8 +36,9 @@ from ..measurement import Measurement
 @functools.lru_cache(maxsize=8)
 def spectral_to_rgb_matrix(wavelengths: tuple[float, ...]) -> np.ndarray:
     """(n, 3) matrix M with rgb = spectrum @ M (CIE 1931 2-degree, Rec. 709, constant 1 -> (1,1,1))."""
-    import colour
+    from .._colour import import_colour
 
+    colour = import_colour()
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
     wl = np.asarray(wavelengths, dtype=np.float64)
     lo, hi = cmfs.wavelengths.min(), cmfs.wavelengths.max()

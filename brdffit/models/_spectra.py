@@ -44,8 +44,9 @@ def srgb_projection() -> np.ndarray:
     (``spectrum_list_to_srgb(..., bounded=False, d65=True)``): CIE 1931 2-degree colour matching
     functions and D65 (colour-science's tables, 5 nm, linear between samples as Mitsuba's), a
     Riemann sum of 1000 steps over [360, 830] nm. rgb = M @ values."""
-    import colour
+    from .._colour import import_colour
 
+    colour = import_colour()
     w = CIE_MIN + np.arange(STEPS) / (STEPS - 1) * (CIE_MAX - CIE_MIN)
     grid = np.arange(CIE_MIN, CIE_MAX + 1.0, 5.0)
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
