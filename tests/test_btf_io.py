@@ -145,3 +145,20 @@ def test_bad_btf_sources(tmp_path):
         z.writestr("tl015 pl061 tv000 pv000.hdr", b"")
     with pytest.raises(InputError, match="not on the UBO-81 grid"):
         brdffit.load_btf(tmp_path / "odd.zip")
+
+
+def test_a_broken_exr_in_a_zip_is_named_by_its_member(tmp_path):
+    """The OpenEXR binding's message named the scratch copy it was given (gone by the time it is read); the line
+    names the archive's member instead."""
+    model, maps = _truth(2, 2, seed=6)
+    zpath = gen.write_model_btf(tmp_path / "ubo.zip", model, maps, archive=True)
+    broken = tmp_path / "broken.zip"
+    with zipfile.ZipFile(zpath) as z, zipfile.ZipFile(broken, "w") as out:
+        names = z.namelist()
+        for name in names:
+            out.writestr(name, b"not an exr" if name == names[7] else z.read(name))
+    with pytest.raises(InputError) as info:
+        brdffit.load_btf(broken, cache_dir=tmp_path / "cache")
+    said = str(info.value)
+    assert said.startswith(f"{broken}:{names[7]}: unreadable image: ") and "brdffit-zip-" not in said, said
+    assert names[7] in said.split("unreadable image: ", 1)[1], said

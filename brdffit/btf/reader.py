@@ -244,6 +244,10 @@ class _Zip:
             try:
                 f.write_bytes(self.zf.read(name))
                 return _images.read_image(f, srgb=srgb)
+            except InputError as exc:  # said of the member: the scratch file is gone by then
+                raise InputError(self.label(key), str(exc.problem).replace(str(f), name)) from None
+            except Exception as exc:  # noqa: BLE001 - the same
+                raise _unreadable(self.label(key), exc, str(f), name) from exc
             finally:
                 f.unlink(missing_ok=True)
         with self.zf.open(name) as fh:
@@ -401,13 +405,21 @@ class _TempOwner:
         self._finalizer = weakref.finalize(self, remove_scratch, folder)
 
 
+def _unreadable(label: str, exc: Exception, path: str | None = None, member: str | None = None) -> InputError:
+    """The one line for an image that cannot be decoded; ``path`` (a scratch copy) said as ``member``."""
+    said = " ".join(str(exc).split())
+    if path is not None:
+        said = said.replace(path, member)
+    return InputError(label, f"unreadable image: {type(exc).__name__}: {said[:200]}")
+
+
 def _decode(src, key, srgb, region, step) -> np.ndarray:
     try:
         img = src.read(key, srgb)
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - a broken image is named by its file
-        raise InputError(src.label(key), f"unreadable image: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from exc
+        raise _unreadable(src.label(key), exc) from exc
     if region is not None:
         r0, r1, c0, c1 = region
         img = img[r0:r1, c0:c1]
