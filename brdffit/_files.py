@@ -358,16 +358,18 @@ def remove_scratch(path: Path) -> None:
 
 @contextlib.contextmanager
 def scratch_file(path: Path):
-    """For a ``with`` block that writes ``path`` and removes it or renames it away before it ends (a BTF's
-    tile cache written beside its final name): the file is listed as this run's scratch while the block
-    runs, so that a Ctrl-C of the executable removes it too."""
+    """For a ``with`` block that writes ``path`` and renames it to its final name (a BTF's tile cache, a
+    tile's file): the file is listed as this run's scratch while the block runs, so that a Ctrl-C of the
+    executable removes it too, and it is removed when the block ends without renaming it (an error)."""
     with _GUARD:
         _SCRATCH.append(path)
     try:
         yield path
     finally:
-        with _GUARD, contextlib.suppress(ValueError):
-            _SCRATCH.remove(path)
+        with _GUARD:
+            _remove(path)
+            with contextlib.suppress(ValueError):
+                _SCRATCH.remove(path)
 
 
 @contextlib.contextmanager

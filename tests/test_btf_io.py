@@ -162,3 +162,4 @@ def test_a_broken_exr_in_a_zip_is_named_by_its_member(tmp_path):
     said = str(info.value)
     assert said.startswith(f"{broken}:{names[7]}: unreadable image: ") and "brdffit-zip-" not in said, said
     assert names[7] in said.split("unreadable image: ", 1)[1], said
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == []  # the cache half written is removed

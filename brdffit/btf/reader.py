@@ -342,7 +342,7 @@ def load_btf(
             buf = np.zeros((batch, nr * tile, nc * tile, c), np.float32)
             from ..io import PROGRESS
 
-            # listed while it is written, so that a Ctrl-C of the executable removes it (in cache_dir too)
+            # listed while it is written (a Ctrl-C of the executable removes it, in cache_dir too); gone on an error
             with scratch_file(tmp):
                 arr = np.memmap(tmp, dtype=np.float32, mode="w+", shape=shape)
                 token = PROGRESS.set(bool(progress))
@@ -369,8 +369,6 @@ def load_btf(
     except BaseException:
         if cache_dir is None and "folder" in locals():
             remove_scratch(folder)
-        if "tmp" in locals() and Path(tmp).exists():
-            Path(tmp).unlink()
         raise
     finally:
         src.close()
