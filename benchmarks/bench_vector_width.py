@@ -47,7 +47,7 @@ def main() -> None:
     data = prepare_values(values, wi, wo, np.ones(len(wi)))
     o = FitOptions(chunk=64, lanes=1)
     space = o.space(model)
-    fitted = solve(space, o, data, results=False)
+    fitted = solve(space, o, data, k=o.starts(model), results=False)
     rng = np.random.default_rng(0)
     starts = np.clip(fitted.v * (1 + 0.03 * rng.standard_normal(fitted.v.shape)), space.lo, space.hi)
     round_stage = jax.jit(stages.round_stage(objective_of(model, o.loss), "lm", o.rtol, o.atol, o.max_steps, True, 1))

@@ -43,6 +43,7 @@ TESTS_BY_MODULE = {
     "brdffit.fitting.stages": ["tests/test_program_cache.py", "tests/test_solver.py", "tests/test_fit_claims.py"],
     "brdffit.fitting.driver": ["tests/test_fit_batch_options.py", "tests/test_fit_status.py", "tests/test_multistart.py",
                                "tests/test_fit_claims.py"],
+    "brdffit.fitting.measurements": ["tests/test_fit_batch_options.py", "tests/test_fit_status.py", "tests/test_fit_claims.py"],
     "brdffit.fitting.options": ["tests/test_fit_batch_options.py", "tests/test_cli_defaults.py"],
     "brdffit.fitting.cache": ["tests/test_program_cache_keys.py", "tests/test_program_cache.py"],
     "brdffit.fitting.compare": ["tests/test_compare_report.py", "tests/test_surfaces.py"],
@@ -54,7 +55,7 @@ TESTS_BY_MODULE = {
     "brdffit.fitting.solver_lm": ["tests/test_solver.py", "tests/test_multistart.py"],
     "brdffit.fitting.solver_optx": ["tests/test_solver.py", "tests/test_parameter_space.py"],
     "brdffit.fitting.solver_scipy": ["tests/test_solver.py", "tests/test_fit_status.py"],
-    "brdffit.fitting.objective": ["tests/test_structure.py", "tests/test_losses_values.py"],
+    "brdffit.fitting.objective": ["tests/test_structure.py", "tests/test_losses_values.py", "tests/test_multistart.py"],
 }
 RECHECK = Path("mutants/recheck.json")
 

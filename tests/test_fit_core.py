@@ -15,7 +15,7 @@ from brdffit import models
 from brdffit.errors import UsageError
 from brdffit.fitting import LOSSES, FitResult, compare, fit, fit_batch, select
 from brdffit.fitting import losses as L
-from brdffit.fitting.driver import standard_errors
+from brdffit.fitting.measurements import standard_errors
 from brdffit.fitting.problem import resolve_model
 from brdffit.grid import spherical_to_cartesian
 

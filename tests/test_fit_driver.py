@@ -110,7 +110,7 @@ def test_of_several_given_starts_the_one_that_fits_the_data_best_starts_a_fit(mo
 
     monkeypatch.setattr(Stages, "starts", recorded)
     options = FitOptions()
-    res = driver.solve(options.space(model), options, data, starts=candidates, grid=False, results=False)
+    res = driver.solve(options.space(model), options, data, k=1, starts=candidates, grid=False, results=False)
     assert ranked == [[0]]  # the rough table's three equal candidates are not ranked
     np.testing.assert_array_equal(res.start, np.stack([a, b]))
     assert (res.code == 0).all() and res.steps.max() <= 3
@@ -175,6 +175,6 @@ def test_lm_damps_its_first_step_less_from_a_near_start(near):
     data = prepare_values(np.stack([values, values]), wi, wo, np.ones(len(wi)))
     options = FitOptions(loss="l2", max_steps=1)
     starts = np.stack([[kd0, kd0], [kd0, kd1]])  # one start; two that differ
-    res = driver.solve(options.space(model), options, data, starts=starts, grid=False, near=near, results=False)
+    res = driver.solve(options.space(model), options, data, k=1, starts=starts, grid=False, near=near, results=False)
     lam = np.array([NEAR_START_DAMPING if near else START_DAMPING, START_DAMPING])[:, None]
     np.testing.assert_allclose(res.v, res.start + (kd_true - res.start) / (1 + lam), rtol=1e-10)

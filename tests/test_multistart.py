@@ -12,6 +12,7 @@ import pytest
 
 import brdffit
 from brdffit.fitting import init as grid_init
+from brdffit.fitting.objective import objective_of
 from brdffit.fitting.space import parameter_space
 from brdffit.fitting.problem import prepare, resolve_model
 from brdffit.grid import ubo_pairs
@@ -22,7 +23,7 @@ def best_grid_starts(mdl, loss, data, space, anchor, k):
     grid scores (``init.subset_rows``): what a fit's start stage ranks, computed here on its own."""
     grid = jnp.asarray(grid_init.cached_grid(mdl, space.lo, space.hi, space.free, anchor))
     rows = grid_init.take_rows(data, grid_init.subset_rows(data))
-    flats, values = jax.jit(grid_init.vp_grid(mdl, loss))(
+    flats, values = jax.jit(grid_init.vp_grid(objective_of(mdl, loss)))(
         grid, rows, jnp.asarray(space.lo), jnp.asarray(space.hi), jnp.asarray(space.free, dtype=bool),
         jnp.asarray(anchor))
     return np.asarray(flats)[np.argsort(np.asarray(values), kind="stable")[:k]]

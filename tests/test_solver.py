@@ -51,7 +51,7 @@ def _solve(meas, lo, hi, free, start, solver="lm", loss="log"):
     free = np.asarray(free, bool)
     space = dataclasses.replace(options.space(resolve_model("ggx", 3)), lo=np.asarray(lo, float),
                                 hi=np.asarray(hi, float), free=free, values=np.where(free, np.nan, start))
-    out = solve(space, options, stack_data([prep.data]), starts=start[None], grid=False)
+    out = solve(space, options, stack_data([prep.data]), k=1, starts=start[None], grid=False)
     return out.v[0], float(out.loss[0]), int(out.code[0]), int(out.steps[0])
 
 

@@ -158,7 +158,7 @@ def fit_tiles(btf: BTF, tiles, mdl, options, neighbours: bool = True, loaded=Non
     n = int(offsets[-1])
     flat = np.zeros((n, mdl.n_free))
     out = {"loss": np.zeros(n), "converged": np.zeros(n, bool), "steps": np.zeros(n, int)}
-    run = _Texels(data, space, unit, options, clock)
+    run = _Texels(data, space, unit, options, options.starts(mdl), clock)
 
     def fit(texels, starts=None):
         return _fit_texels(run, texels, starts)
@@ -209,12 +209,13 @@ def neighbour_starts(flat: np.ndarray, sources: np.ndarray) -> np.ndarray:
 
 class _Texels(NamedTuple):
     """What the passes over a group of tiles share: their prepared data, the space, the unit the fits are
-    solved in, the options, a clock."""
+    solved in, the options and the starts a texel solves from the grid (``FitOptions.starts``), a clock."""
 
     data: object
     space: object
     unit: float
     options: object
+    k: int
     clock: dict | None
 
 
@@ -224,7 +225,7 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
     candidates where they differ). Returns flat params (n, P), loss, converged, steps."""
     from ..fitting.driver import solve
 
-    res = solve(run.space, run.options, run.data, unit=run.unit, fits=texels, starts=starts, grid=starts is None,
+    res = solve(run.space, run.options, run.data, k=run.k, unit=run.unit, fits=texels, starts=starts, grid=starts is None,
                 near=starts is not None, results=False)
     if run.clock is not None:
         run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]

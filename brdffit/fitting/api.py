@@ -12,7 +12,7 @@ from .._fit_defaults import DEFAULT_ATOL, DEFAULT_LOSS, DEFAULT_MAX_STEPS, DEFAU
 from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
-from .driver import fit_measurements, with_warning
+from .measurements import fit_measurements, with_warning
 from .options import FitOptions
 from .result import FitResult
 

@@ -36,11 +36,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..models.base import Model, Param
-from . import losses as L
 from .lanes import in_solve_dtype, map_lanes
 from .linalg import spd_solve
 from .problem import Data
-from .objective import Objective, basis_fn, separable
+from .objective import Objective
 
 POINTS_ROUGHNESS = 10
 #: Roughness values shared by repeated lobes (their strictly increasing pairs: 45 for 10 values; 8 values missed the best basin of vch_golden_yellow).
@@ -186,8 +185,10 @@ def _box_lsq(gram, rhs, lo, hi, sweeps: int = SWEEPS):
 
 
 @functools.lru_cache(maxsize=None)
-def vp_grid(model: Model, loss: str):
-    """run(grid (G, m), data, lo, hi, free, anchor) -> (flat params (G, P), loss (G,))."""
+def vp_grid(objective: Objective):
+    """run(grid (G, m), data, lo, hi, free, anchor) -> (flat params (G, P), loss (G,)): the variable projection of
+    ``objective`` at each grid point (the linear parameters solved under the loss made linear at the reference)."""
+    model, residual, row_weights = objective.model, objective.values_residual, objective.row_weights
     lin = [p for p in model.params if p.linear]
     nonlin = [p for p in model.params if not p.linear]
     C = model.channels
@@ -212,16 +213,16 @@ def vp_grid(model: Model, loss: str):
 
     # Separable models whose linear parameters are all per channel (every model of the library
     # but ashikhmin_shirley): one formula evaluation per grid point gives f_0 and every column
-    # (objective.basis_fn), and the linear least squares splits into one small system per channel.
-    per_channel = separable(model) and all(model.size(p) == C for p in lin)
-    basis = basis_fn(model) if per_channel else None
+    # (``Objective.basis``), and the linear least squares splits into one small system per channel.
+    per_channel = objective.basis is not None and all(model.size(p) == C for p in lin)
+    basis = objective.basis if per_channel else None
     lin_flat = np.asarray([[start[p.name] + c for p in lin] for c in range(C)], dtype=int)  # (C, L)
 
     def one_per_channel(point, data: Data, lo, hi, free, anchor):
         wi, wo, ref, sqrt_w, cos_i, floor = data
         F = basis(jnp.asarray(point, ref.dtype).reshape(-1), wi, wo)  # (L + 1, N)
         b0, B = F[-1], F[:-1] - F[-1:]  # (N,), (L, N)
-        u = (sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)).T  # (C, N)
+        u = (sqrt_w**2 * row_weights(ref, cos_i, floor)).T  # (C, N)
         gram = jnp.einsum("cn,jn,kn->cjk", u, B, B)
         rhs = jnp.einsum("cn,jn->cj", u * (ref.T - b0[None]), B)
         s = jnp.sqrt(jnp.maximum(jnp.diagonal(gram, axis1=1, axis2=2), jnp.finfo(ref.dtype).tiny))  # (C, L)
@@ -230,7 +231,7 @@ def vp_grid(model: Model, loss: str):
         x = jax.vmap(_box_lsq)(gram / s[:, :, None] / s[:, None, :], rhs / s, elo * s, ehi * s) / s
         x = jnp.clip(x, elo, ehi)  # (C, L)
         f = b0[None] + x @ B  # (C, N)
-        r = L.residual(loss, f, ref.T, cos_i.T, sqrt_w.T, floor[:, None])
+        r = residual(f, ref.T, cos_i.T, sqrt_w.T, floor[:, None])
         # A non-finite residual makes the point's value infinite (as a NaN value is below). The select also keeps
         # XLA from handing the whole log loss to the YNNPACK fusion of the sum, where it ran at ~5 ns a value
         # against ~2 ns in XLA's own loop: ggx's start stage 0.68-0.74 -> 0.43-0.53 ms a lane on one core.
@@ -257,7 +258,7 @@ def vp_grid(model: Model, loss: str):
                     if e[0] == i:
                         cols.append(g if e[1] < 0 else g * (jnp.arange(C) == e[1]))
             A = jnp.stack(cols, axis=-1)  # (N, C, L)
-            u = sqrt_w**2 * L.linearised_row_weights(loss, ref, cos_i, floor)  # (N, C)
+            u = sqrt_w**2 * row_weights(ref, cos_i, floor)  # (N, C)
             Au = A * u[..., None]
             gram = jnp.einsum("ncl,nck->lk", Au, A)
             rhs = jnp.einsum("ncl,nc->l", Au, ref - f0)
@@ -267,7 +268,7 @@ def vp_grid(model: Model, loss: str):
             x = _box_lsq(gram / s[:, None] / s[None, :], rhs / s, elo * s, ehi * s) / s
             x = jnp.clip(x, elo, ehi)
             f = f0 + jnp.einsum("ncl,l->nc", A, x)
-        r = L.residual(loss, f, ref, cos_i, sqrt_w, floor)
+        r = residual(f, ref, cos_i, sqrt_w, floor)
         r = jnp.where(jnp.isfinite(r), r, jnp.inf)  # as in one_per_channel
         value = jnp.sum(r**2)
         return flat_of(point, x), jnp.where(jnp.isfinite(value), value, jnp.inf)
@@ -329,7 +330,7 @@ def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
     (:func:`vp_grid`: the linear parameters solved at each) when ``grid``, and the E given starts. ``lane``:
     the given starts (L, E, P), or (grids (L, G, m), given) for a grid of each lane's own (then
     ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
-    vp = vp_grid(objective.model, objective.loss)
+    vp = vp_grid(objective)
     residual = objective.residual
 
     def one(grid_points, given, data, lo, hi, free, anchor, subset):

@@ -250,8 +250,9 @@ def fit_constants(model: Model, loss: str, data: Data, geometry=None, jacobian: 
 
 
 def model_loss(model: Model, loss: str):
-    """loss_of(v, data, consts): the fit's loss at v, the model's values by the step's route
-    (:func:`model_values`: model.eval costs ~10x more on ggx/UBO-81)."""
+    """(loss_of, measures): loss_of(v, data, consts), the fit's loss at v; measures(v, data, geometry=None), the
+    loss and every metric of the model's values at v (``losses.values_metrics``: a finish's). The model's values
+    by the step's route (:func:`model_values`: model.eval costs ~10x more on ggx/UBO-81)."""
     values = model_values(model)
 
     def loss_of(v, data, consts):
@@ -259,7 +260,10 @@ def model_loss(model: Model, loss: str):
         r = L.residual(loss, values(v, data, consts.geometry), ref, cos_i, sqrt_w, floor, consts.g_ref)
         return jnp.sum(r * r)
 
-    return loss_of
+    def measures(v, data, geometry=None):
+        return L.values_metrics(values(v, data, geometry), data, (loss,))
+
+    return loss_of, measures
 
 
 def _split_vector(model: Model):
@@ -382,9 +386,10 @@ def model_values(model: Model):
 
 
 class Objective(NamedTuple):
-    """One model under one loss, as the stages and solvers of a fit evaluate it: built once per (model, loss)
-    (:func:`objective_of`) and handed to them whole. They need these functions; the model itself only names
-    their compiled programs (``model``, ``loss``) and lays out the grid of starts."""
+    """One model under one loss, as the stages, starts and solvers of a fit evaluate it: built once per (model,
+    loss) (:func:`objective_of`) and handed to them whole. What they evaluate is here, so that they see the model
+    and the loss through it alone; the model itself only names their compiled programs (``model``, ``loss``) and
+    lays out the grid of starts."""
 
     model: Model
     loss: str
@@ -392,7 +397,11 @@ class Objective(NamedTuple):
     residual: Callable  # (v, data) -> r (M,), the loss's residuals at a flat vector (:func:`flat_residual`)
     normal_equations: Callable  # (v, data, g_ref=None, geometry=None) -> (r.r, J^T r, J^T J)
     values: Callable  # (v, data, geometry=None) -> f (N, C), by the step's route (:func:`model_values`)
-    loss_at: Callable  # (v, data, consts) -> the fit's loss (:func:`model_loss`)
+    basis: Callable | None  # (theta, wi, wo) -> the basis (L + 1, N) of a separable model (:func:`basis_fn`), or None
+    loss_at: Callable  # (v, data, consts) -> the fit's loss at v (:func:`model_loss`)
+    measures: Callable  # (v, data, geometry=None) -> the fit's loss and every metric at v (:func:`model_loss`)
+    values_residual: Callable  # (f, ref, cos_i, sqrt_w, floor) -> the residuals (N, C) of values f (``losses.residual``)
+    row_weights: Callable  # (ref, cos_i, floor) -> the weights (N, C) of the loss made linear at the reference
     constants: Callable  # (data, geometry=None) -> FitConstants (:func:`fit_constants`)
     geometry: Callable  # (data) -> the direction-only terms, or None (:func:`precompute_geometry`)
 
@@ -417,7 +426,9 @@ def objective_of(model: Model, loss: str, jacobian: str = "float64") -> Objectiv
     compiled programs are kept per objective."""
     jacobian = jacobian_precision(model, jacobian)
     return Objective(model, loss, jacobian, flat_residual(model, loss), normal_equations(model, loss, jacobian),
-                     model_values(model), model_loss(model, loss),
+                     model_values(model), basis_fn(model) if separable(model) else None, *model_loss(model, loss),
+                     functools.partial(L.residual, loss),
+                     functools.partial(L.linearised_row_weights, loss),
                      functools.partial(fit_constants, model, loss, jacobian=jacobian),
                      functools.partial(precompute_geometry, model, jacobian=jacobian))
 

@@ -412,7 +412,7 @@ def fit_warnings(space: ParameterSpace, v, at_bound: Mapping[str, str], stderr: 
       and only its peak's product with the scale (e.g. ks / alpha^2 for GGX) is measured; on the
       UBO-81 grid (14.5 degrees) that is GGX alpha < 0.098, Beckmann alpha < 0.076, Phong n > 86;
     * a free parameter with no standard error that is not on a bound: the data do not determine
-      it (a near-null direction of J'J, see ``brdffit.fitting.driver.standard_errors``).
+      it (a near-null direction of J'J, see ``brdffit.fitting.measurements.standard_errors``).
     """
     out = [_bound_sentence(space, name, sides) for name, sides in at_bound.items()]
     if spacing is not None:

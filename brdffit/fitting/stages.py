@@ -37,7 +37,6 @@ from ..errors import UsageError
 from .init import cached_grid, start_stage, subset_rows
 from .cache import compiled
 from .lanes import Plan, gather_rows, in_solve_dtype, map_lanes, per_lane, place_lanes, plan, shared_geometry
-from .losses import values_metrics
 from .objective import Objective, objective_of
 from .problem import Data
 from .state import Rounds
@@ -74,20 +73,15 @@ def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max
     in its one round; its ``resume`` holds the loss at v and at the start (``c``, ``c0``) and J^T J (``H``)."""
     from .solve import solve_one  # optimistix: imported only when a program is traced
 
-    solve = solve_one(objective, solver, rtol, atol, max_steps)
-
-    def one(v, then, data, lo, hi, free, steps, geometry):
-        data = in_solve_dtype(data)
-        consts = objective.constants(data, geometry)
+    @_over_lanes(objective, lanes)
+    def run(lane, data, consts, lo, hi, free, steps):
+        v, then = lane
+        solve = solve_one(objective, solver, rtol, atol, max_steps)
         if solver in RESUMABLE:
             if first:
                 return solve(v, data, lo, hi, free, consts, steps=steps, damping=then)
             return solve(v, data, lo, hi, free, consts, resume=then, steps=steps)
         return solve(v, data, lo, hi, free, consts)
-
-    def run(lane, data, lo, hi, free, steps):
-        geometry = shared_geometry(objective, data)
-        return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, steps, geometry), lane, data, lanes)
 
     return run
 
@@ -99,10 +93,9 @@ def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
     (the standard errors' need)."""
     loss, ne = objective.loss, objective.normal_equations
 
-    def one(v, data, geometry):
-        data = in_solve_dtype(data)
-        consts = objective.constants(data, geometry)
-        values = values_metrics(objective.values(v, data, consts.geometry), data, (loss,))
+    @_over_lanes(objective, lanes)
+    def run(v, data, consts):
+        values = objective.measures(v, data, consts.geometry)
         out = {"loss": values[loss], "floor": consts.loss_floor}
         if metrics:
             out["metrics"] = values
@@ -110,11 +103,28 @@ def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
             out["jtj"] = ne(v, data, consts.g_ref, consts.geometry)[2]
         return out
 
-    def run(v, data):
-        geometry = shared_geometry(objective, data)
-        return map_lanes(lambda x, d: one(x, d, geometry), v, data, lanes)
-
     return run
+
+
+def _over_lanes(objective: Objective, lanes: int):
+    """A stage's function of one lane, ``one(lane_arg, data, consts, *args)``, made the stage's program
+    ``run(lane_args, data, *args)`` over every lane (``lanes.map_lanes``): each lane's data in the solve's
+    precision, with its fit's constants (``objective.fit_constants``); the direction-only terms computed once
+    for the lanes when they share their directions (``lanes.shared_geometry``)."""
+
+    def over_lanes(one):
+        def run(lane_args, data, *args):
+            geometry = shared_geometry(objective, data)
+
+            def lane(x, d):
+                d = in_solve_dtype(d)
+                return one(x, d, objective.constants(d, geometry), *args)
+
+            return map_lanes(lane, lane_args, data, lanes)
+
+        return run
+
+    return over_lanes
 
 
 # -- running a stage over lanes ------------------------------------------------------------------------
@@ -242,12 +252,6 @@ class Stages:
         finishes (the table's own ``Stages`` of a fit solved in another unit), never needs it."""
         return cached_grid(self.model, *self.bounds, self.space.anchor)
 
-    def _count(self, compile_s: float, run_s: float, init: bool = False) -> None:
-        self.seconds["compile"] += compile_s
-        self.seconds["run"] += run_s
-        if init:
-            self.seconds["init"] += compile_s + run_s
-
     def starts(self, fits: np.ndarray, given: np.ndarray, k: int, grids=None, subset=None, grid: bool = True):
         """The k best candidates (len(fits), k, P) of each fit: grid points (the default grid, or a grid of
         each fit's own: ``grids`` (n, G, m); none without ``grid``) and the ``given`` (n, E, P), ranked on
@@ -266,25 +270,29 @@ class Stages:
         key = (self.objective, k, grid, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
-        self._count(c_s, r_s, init=True)
+        self.seconds["compile"] += c_s
+        self.seconds["run"] += r_s
+        self.seconds["init"] += c_s + r_s
         return out[0]
 
     def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None, damping=START_DAMPING) -> Rounds:
         o = self.options
-        if o.solver == "scipy":  # in Python, one start after another; scipy is imported only here
+        if o.solver != "scipy":
+            r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
+                             self.bounds, self.plan, damping=damping, progress=progress, note=self.note)
+        else:  # in Python, one start after another; scipy is imported only here
             from .solver_scipy import solve_lanes
 
             r = solve_lanes(self.objective, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
                             max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
-        else:
-            r = solve_rounds(self.objective, o.solver, o.rtol, o.atol, o.max_steps, v0, self.data, fits,
-                             self.bounds, self.plan, damping=damping, progress=progress, note=self.note)
-        self._count(r.compile_s, r.run_s)
+        self.seconds["compile"] += r.compile_s
+        self.seconds["run"] += r.run_s
         return r
 
     def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
         key = (self.objective, metrics, jtj, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
                                   note=self.note)
-        self._count(c_s, r_s)
+        self.seconds["compile"] += c_s
+        self.seconds["run"] += r_s
         return out

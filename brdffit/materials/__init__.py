@@ -44,7 +44,7 @@ def convert(fit, model, *, loss: str | None = None, **fit_options):
     the source model and the conversion error: ``rel_rmse`` and ``log_rmse`` of the converted BRDF
     against the source fit's on that grid (docs/fitting.md#fitting's definitions)."""
     from .._fit_defaults import LOSSES
-    from ..fitting.driver import fit_measurements
+    from ..fitting.measurements import fit_measurements
     from ..fitting.options import FitOptions
     from ..grid import ubo_pairs
     from ..measurement import Measurement
