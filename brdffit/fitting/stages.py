@@ -76,6 +76,7 @@ def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max
     @_over_lanes(objective, lanes)
     def run(lane, data, consts, lo, hi, free, steps):
         v, then = lane
+        # Built where the lane's function is traced (once or twice a program: Python closures, no numbers).
         solve = solve_one(objective, solver, rtol, atol, max_steps)
         if solver in RESUMABLE:
             if first:
