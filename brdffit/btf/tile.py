@@ -225,8 +225,8 @@ def _fit_texels(run: _Texels, texels: np.ndarray, starts: np.ndarray | None = No
     candidates where they differ). Returns flat params (n, P), loss, converged, steps."""
     from ..fitting.driver import solve
 
-    res = solve(run.space, run.options, run.data, k=run.k, unit=run.unit, fits=texels, starts=starts, grid=starts is None,
-                near=starts is not None, results=False)
+    res = solve(run.space, run.options, run.data, k=run.k, unit=run.unit, fits=texels, starts=starts,
+                grid=starts is None, near=starts is not None, results=False)
     if run.clock is not None:
         run.clock["compile"] = run.clock.get("compile", 0.0) + res.seconds["compile"]
         run.clock["solve"] = run.clock.get("solve", 0.0) + res.seconds["run"]

@@ -18,8 +18,8 @@ The modules, in the order a fit uses them (read them so):
    runs them: chunks, lanes, rounds), ``state``, ``cache`` (kept per process and on disk);
 6. the driver: ``options`` (``FitOptions``, checked once), ``driver`` (every fit runs there:
    ``solve`` -> ``Solved``, one row per fit with its status code), ``measurements``
-   (``fit_measurements``: measurements in, FitResults out), ``api`` (the public ``fit`` and ``fit_batch``; ``brdffit.fit_btf`` calls the
-   driver too);
+   (``fit_measurements``: measurements in, FitResults out), ``api`` (the public ``fit`` and
+   ``fit_batch``; ``brdffit.fit_btf`` calls the driver too);
 7. results: ``result`` (``FitResult``), ``fitfile`` (the fit file's checks);
 8. choosing: ``compare`` (error against run time), ``select``.
 """

@@ -68,14 +68,16 @@ def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
     return np.arange(n) * k + np.argmin(key, axis=1)
 
 
-def solve(space: ParameterSpace, options: FitOptions, data: Data, *, k: int, unit: float = 1.0, fits: np.ndarray | None = None,
-          starts: np.ndarray | None = None, grid: bool = True, near: bool = False, results: bool = True,
-          check_given: bool = False, note: Callable[[str], None] = _quiet, progress=None) -> Solved:
+def solve(space: ParameterSpace, options: FitOptions, data: Data, *, k: int, unit: float = 1.0,
+          fits: np.ndarray | None = None, starts: np.ndarray | None = None, grid: bool = True, near: bool = False,
+          results: bool = True, check_given: bool = False, note: Callable[[str], None] = _quiet,
+          progress=None) -> Solved:
     """Fit the fits ``fits`` (rows of the per-fit fields; default: all) of ``data`` (``Data``: ref and floor
     with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;
-    the results' rows follow ``fits``. ``k``: how many of the grid's best points each fit solves from (with the
-    grid; ``FitOptions.starts`` of the model, resolved once by the caller). ``unit``: the unit the fits are solved in (``problem.data_unit`` of
-    the table: 1, or a power of ten); ``data``, ``space``, ``starts`` and every result are in the table's.
+    the results' rows follow ``fits``. ``k``: how many of the grid's best points each fit solves from (with
+    the grid; ``FitOptions.starts`` of the model, resolved once by the caller). ``unit``: the unit the fits
+    are solved in (``problem.data_unit`` of the table: 1, or a power of ten); ``data``, ``space``, ``starts``
+    and every result are in the table's.
     ``starts``: (len(fits), P) given starts, or (len(fits), E, P) E candidates each, ranked beside the grid's
     points (``grid``); without the grid a fit's candidates are ranked where they differ (on the grid's
     rows, as its points are), and the best starts it. ``near``: the given starts lie near their fits' optima (a

@@ -400,7 +400,7 @@ class Objective(NamedTuple):
     basis: Callable | None  # (theta, wi, wo) -> the basis (L + 1, N) of a separable model (:func:`basis_fn`), or None
     loss_at: Callable  # (v, data, consts) -> the fit's loss at v (:func:`model_loss`)
     measures: Callable  # (v, data, geometry=None) -> the fit's loss and every metric at v (:func:`model_loss`)
-    values_residual: Callable  # (f, ref, cos_i, sqrt_w, floor) -> the residuals (N, C) of values f (``losses.residual``)
+    values_residual: Callable  # (f, ref, cos_i, sqrt_w, floor) -> residuals (N, C) of values f (``losses.residual``)
     row_weights: Callable  # (ref, cos_i, floor) -> the weights (N, C) of the loss made linear at the reference
     constants: Callable  # (data, geometry=None) -> FitConstants (:func:`fit_constants`)
     geometry: Callable  # (data) -> the direction-only terms, or None (:func:`precompute_geometry`)
