@@ -53,7 +53,7 @@ def main() -> None:
     round_stage = jax.jit(stages.round_stage(objective_of(model, o.loss), "lm", o.rtol, o.atol, o.max_steps, True, 1))
     dampings = np.full(len(starts), START_DAMPING)  # the first round's lanes: their first step's damping
     call = ((jnp.asarray(starts), dampings), data, jnp.asarray(space.lo), jnp.asarray(space.hi),
-            np.asarray(space.free, bool), np.int32(o.max_steps))
+            np.asarray(space.free, bool), np.int32(o.max_steps), np.int32(len(starts)))
     programs = {"XLA default": round_stage.lower(*call).compile(),
                 "brdffit's": round_stage.lower(*call).compile(compiler_options=options)}
     best = dict.fromkeys(programs, np.inf)

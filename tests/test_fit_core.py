@@ -275,7 +275,8 @@ def test_fit_batch_matches_single_fits():
 def test_a_fit_does_not_depend_on_the_size_of_the_program_it_ran_in():
     """On a CPU the lanes run one at a time, in compiled programs of a few sizes (docs/fitting.md#lanes): a
     fit's numbers must not depend on which size it ran in, so that a BTF's maps do not depend on how its
-    tiles were grouped. ``chunk=1``: every fit in a program of one lane; ``chunk=4``: the three in one of four."""
+    tiles were grouped. ``chunk=1``: every fit in a program of one lane; ``chunk=4``: in programs of four (the
+    lanes split over the cores, ``Plan.sizes``: on two cores two of them in one of four, the third in one of one)."""
     ms = [_measurement({**TRUE, "alpha": [a]}, noise=0.01, seed=3) for a in (0.12, 0.3, 0.45)]
     one, four = fit_batch(ms, "ggx", chunk=1), fit_batch(ms, "ggx", chunk=4)
     for a, b in zip(one, four):
@@ -283,6 +284,38 @@ def test_a_fit_does_not_depend_on_the_size_of_the_program_it_ran_in():
         assert a.loss_value == b.loss_value
         for k in a.params:
             np.testing.assert_array_equal(a.params[k], b.params[k], err_msg=k)
+
+
+def test_a_cpu_splits_its_lanes_evenly_over_its_cores_in_few_program_sizes():
+    """Lanes one at a time (a CPU): n lanes split into a multiple of the workers' count of calls of nearly
+    equal counts, each in the next compiled size (1, 4, 16, 64); vectorised lanes (an accelerator's): full
+    chunks, then the rest padded (docs/fitting.md#lanes)."""
+    from brdffit.fitting.lanes import Plan
+
+    cpu = Plan(chunk=64, lanes=1, workers=2, devices=(None,))
+    assert cpu.sizes(64) == [(32, 64), (32, 64)]  # not one call of 64 beside an idle core
+    assert cpu.sizes(192) == [(48, 64)] * 4
+    assert cpu.sizes(10) == [(5, 16), (5, 16)]
+    assert cpu.sizes(1) == [(1, 1)]
+    assert cpu.sizes(0) == []
+    counts = [c for c, _ in cpu.sizes(1000)]
+    assert sum(counts) == 1000 and len(counts) % 2 == 0 and max(counts) - min(counts) <= 1 and max(counts) <= 64
+    assert Plan(chunk=64, lanes=1, workers=1, devices=(None,)).sizes(130) == [(44, 64), (43, 64), (43, 64)]
+    device = Plan(chunk=256, lanes=256, workers=1, devices=(None,), step=256)
+    assert device.sizes(600) == [(256, 256), (256, 256), (88, 256)]
+
+
+def test_a_cpu_call_computes_its_own_lanes_and_not_its_padding():
+    """``lanes.map_lanes`` runs the first ``count`` lanes of a call (a run-time scalar): the lanes padding it
+    to its compiled size are not computed (zeros come back for them), and one program serves every count."""
+    from brdffit.fitting.lanes import map_lanes
+    from brdffit.fitting.problem import Data
+
+    x = jnp.arange(1.0, 5.0)
+    data = Data(*(jnp.zeros((2, 3)),) * 2, jnp.ones((4, 5, 3)), *(jnp.zeros((5, 1)),) * 2, jnp.zeros((4, 3)))
+    run = jax.jit(lambda x, data, count: map_lanes(lambda xi, d: xi * 10 + d.ref.sum(), x, data, 1, count))
+    np.testing.assert_array_equal(run(x, data, np.int32(2)), [25.0, 35.0, 0.0, 0.0])
+    np.testing.assert_array_equal(run(x, data, np.int32(4)), [25.0, 35.0, 45.0, 55.0])
 
 
 def test_scipy_fit_seconds_add_the_grid_and_every_start(monkeypatch):

@@ -325,11 +325,11 @@ def take_rows(data: Data, idx) -> Data:
 # -- the start stage (a compiled program that ``stages.run_stage`` runs over lanes) ---------------------
 @functools.lru_cache(maxsize=None)
 def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
-    """run(lane, data, grid_points (G, m), lo, hi, free, anchor, subset (S,) int) -> (starts (L, k, P), values
-    (L, k)): per lane the k candidates with the lowest loss on the ``subset`` rows, among the grid points
-    (:func:`vp_grid`: the linear parameters solved at each) when ``grid``, and the E given starts. ``lane``:
-    the given starts (L, E, P), or (grids (L, G, m), given) for a grid of each lane's own (then
-    ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
+    """run(lane, data, grid_points (G, m), lo, hi, free, anchor, subset (S,) int, count) -> (starts (L, k, P),
+    values (L, k)): per lane (the first ``count``: ``lanes.map_lanes``) the k candidates with the lowest loss
+    on the ``subset`` rows, among the grid points (:func:`vp_grid`: the linear parameters solved at each) when
+    ``grid``, and the E given starts. ``lane``: the given starts (L, E, P), or (grids (L, G, m), given) for a
+    grid of each lane's own (then ``grid_points`` is not read). Among equal losses the grid (listed first) wins."""
     vp = vp_grid(objective)
     residual = objective.residual
 
@@ -352,10 +352,10 @@ def start_stage(objective: Objective, k: int, grid: bool, lanes: int):
         order = jnp.argsort(values, stable=True)[:k]
         return flats[order], values[order]
 
-    def run(lane, data, grid_points, lo, hi, free, anchor, subset):
+    def run(lane, data, grid_points, lo, hi, free, anchor, subset, count):
         if isinstance(lane, tuple):  # (grids (L, G, m), given): a grid of each lane's own (a lobe re-seeded)
-            return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, anchor, subset), lane, data, lanes)
-        return map_lanes(lambda g, d: one(grid_points, g, d, lo, hi, free, anchor, subset), lane, data, lanes)
+            return map_lanes(lambda x, d: one(x[0], x[1], d, lo, hi, free, anchor, subset), lane, data, lanes, count)
+        return map_lanes(lambda g, d: one(grid_points, g, d, lo, hi, free, anchor, subset), lane, data, lanes, count)
 
     return run
 

@@ -61,16 +61,24 @@ class Plan:
     step: int = 4
 
     def sizes(self, n: int) -> list[tuple[int, int]]:
-        """(lanes, compiled size) of each call for n lanes: full chunks, then the rest padded to the next of
-        a few sizes (one lane per device times a power of ``step``), so that few programs are compiled."""
-        out = [(self.chunk, self.chunk)] * (n // self.chunk)
-        rest = n % self.chunk
-        if rest:
-            size = len(self.devices)
-            while size < rest:
-                size *= self.step
-            out.append((rest, min(size, self.chunk)))
-        return out
+        """(lanes, compiled size) of each call for n lanes, each call's lanes padded to the next of a few
+        sizes (one lane per device times a power of ``step``, at most ``chunk``), so that few programs are
+        compiled. Lanes one at a time (a CPU's loop, :func:`map_lanes`, which runs a call's own lanes and
+        not its padding): the lanes split evenly into a multiple of ``workers`` calls, so that every core
+        has as much to do (64 lanes on two cores: two calls of 32, not one of 64 beside an idle core).
+        Vectorised lanes (an accelerator's, where the padding is computed too): full chunks, then the rest."""
+        if self.lanes == 1 and n:
+            calls = min(n, self.workers * -(-n // (self.workers * self.chunk)))
+            counts = [n // calls + (i < n % calls) for i in range(calls)]
+        else:
+            counts = [self.chunk] * (n // self.chunk) + ([n % self.chunk] if n % self.chunk else [])
+        return [(count, self._size(count)) for count in counts]
+
+    def _size(self, count: int) -> int:
+        size = len(self.devices)
+        while size < count:
+            size *= self.step
+        return min(size, self.chunk)
 
 
 def plan(chunk: int | None = None, lanes: int | None = None) -> Plan:
@@ -137,17 +145,19 @@ def _join(own: Data, shared: Data) -> Data:
     return Data(*(a if a is not None else b for a, b in zip(own, shared)))
 
 
-def map_lanes(fn, lane_args, data: Data, lanes: int):
+def map_lanes(fn, lane_args, data: Data, lanes: int, count=None):
     """``fn(lane_args_i, data_i)`` for every lane i (the leading axis of ``lane_args`` and of ``data``'s
     per-lane fields), ``lanes`` of them vectorised at a time; shared fields are passed whole.
 
     One lane at a time (a CPU's lanes) is a loop over the unbatched ``fn``: a vectorised batch of one gave
     the same run time through a larger program (ggx's round stage lowered in 0.8-1.0 s and compiled in
-    4.4-4.6 s, against 0.54 s and 3.4 s). A lane's numbers must not depend on the program's size (a BTF's
-    maps must not depend on how its tiles were grouped), so the loop is one XLA cannot see through: its
-    trip count is hidden (a loop of one lane is otherwise unrolled into its surroundings), and a single
-    lane's arrays are doubled (an axis of length one is laid out otherwise); either changed the last bits
-    of a lane's result."""
+    4.4-4.6 s, against 0.54 s and 3.4 s). Its trip count is ``count``, a run-time scalar (the call's own
+    lanes, ``Plan.sizes``): the lanes after it, a compiled size's padding, are not computed (their outputs
+    are zeros), and one program serves a call of any count up to its size. A lane's numbers must not depend
+    on the program's size (a BTF's maps must not depend on how its tiles were grouped), so the loop is one
+    XLA cannot see through: a trip count it knew would let it unroll a loop of one lane into its
+    surroundings, and a single lane's arrays are doubled (an axis of length one is laid out otherwise);
+    either changed the last bits of a lane's result. ``count`` None: every lane."""
     own, shared = _split(data)
     if lanes > 1:
         return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
@@ -162,7 +172,8 @@ def map_lanes(fn, lane_args, data: Data, lanes: int):
         return jax.tree_util.tree_map(lambda o, v: o.at[i].set(v), acc, fn(x[0], _join(x[1], shared)))
 
     empty = jax.tree_util.tree_map(lambda s: jnp.zeros((n, *s.shape), s.dtype), out)
-    return jax.lax.fori_loop(0, jax.lax.optimization_barrier(jnp.int32(n)), one, empty)
+    trips = jax.lax.optimization_barrier(jnp.int32(n)) if count is None else jnp.minimum(count, n)
+    return jax.lax.fori_loop(0, trips, one, empty)
 
 
 def shared_geometry(objective: Objective, data: Data):

@@ -66,7 +66,7 @@ ROUND_MIN_LANES = 4
 # -- stages -----------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
 def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max_steps: int, first: bool, lanes: int):
-    """run((v (L, P), then), data, lo, hi, free, steps) -> (v, resume, done (L,), code (L,), steps (L,)): at most
+    """run((v (L, P), then), data, lo, hi, free, steps, count) -> (v, resume, done (L,), code (L,), steps (L,)): at most
     ``steps`` (a run-time scalar, <= ``max_steps``) steps of each lane. ``first``: from the start v, ``then`` (L,)
     each lane's damping of lm's first step (``_fit_defaults.START_DAMPING``); else from the previous round's state,
     ``then`` its ``resume`` (``state.Resume``, one row per lane). A stock solver (not resumable) runs ``max_steps``
@@ -89,7 +89,7 @@ def round_stage(objective: Objective, solver: str, rtol: float, atol: float, max
 
 @functools.lru_cache(maxsize=None)
 def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
-    """run(v (L, P), data) -> dict: ``loss`` (L,) at v afresh, ``floor`` (L,) the loss of an exact fit
+    """run(v (L, P), data, count) -> dict: ``loss`` (L,) at v afresh, ``floor`` (L,) the loss of an exact fit
     (``solve.fit_constants``); with ``metrics`` every metric (dict of (L,)), with ``jtj`` J^T J (L, P, P)
     (the standard errors' need)."""
     loss, ne = objective.loss, objective.normal_equations
@@ -109,19 +109,20 @@ def finish_stage(objective: Objective, metrics: bool, jtj: bool, lanes: int):
 
 def _over_lanes(objective: Objective, lanes: int):
     """A stage's function of one lane, ``one(lane_arg, data, consts, *args)``, made the stage's program
-    ``run(lane_args, data, *args)`` over every lane (``lanes.map_lanes``): each lane's data in the solve's
-    precision, with its fit's constants (``objective.fit_constants``); the direction-only terms computed once
-    for the lanes when they share their directions (``lanes.shared_geometry``)."""
+    ``run(lane_args, data, *args, count)`` over the first ``count`` lanes (``lanes.map_lanes``): each lane's
+    data in the solve's precision, with its fit's constants (``objective.fit_constants``); the direction-only
+    terms computed once for the lanes when they share their directions (``lanes.shared_geometry``)."""
 
     def over_lanes(one):
         def run(lane_args, data, *args):
+            *args, count = args
             geometry = shared_geometry(objective, data)
 
             def lane(x, d):
                 d = in_solve_dtype(d)
                 return one(x, d, objective.constants(d, geometry), *args)
 
-            return map_lanes(lane, lane_args, data, lanes)
+            return map_lanes(lane, lane_args, data, lanes, count)
 
         return run
 
@@ -131,10 +132,11 @@ def _over_lanes(objective: Objective, lanes: int):
 # -- running a stage over lanes ------------------------------------------------------------------------
 def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared: tuple, p: Plan, *,
               on_chunk=None, note=None) -> tuple[dict, float, float]:
-    """``build()(lane_args, data, *shared)`` (a stage of ``stages``) for every lane: ``lane_args`` a pytree
-    of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
-    lane reads. Returns (the outputs as NumPy with the lane axis first, compile seconds, run seconds).
-    ``on_chunk(lanes)`` is called after each call; ``note(text)`` hears of a compile."""
+    """``build()(lane_args, data, *shared, count)`` (a stage of ``stages``) for every lane: ``lane_args`` a
+    pytree of arrays with the lane axis first (L, ...), ``fits`` (L,) the row of ``data``'s per-fit fields each
+    lane reads; ``count`` (an int32 scalar) the call's own lanes, before its compiled size's padding. Returns
+    (the outputs as NumPy with the lane axis first, compile seconds, run seconds). ``on_chunk(lanes)`` is
+    called after each call; ``note(text)`` hears of a compile."""
     fits = np.asarray(fits)
     n = len(fits)
     mask = per_lane(data)
@@ -158,12 +160,14 @@ def run_stage(key: tuple, build, lane_args, data: Data, fits: np.ndarray, shared
     for _, padded in calls:  # compile (or load) each size once, before the calls run on threads
         size = len(padded)
         if size not in programs:
-            programs[size], c_s = compiled(key, build, *call_args(padded), note=note)
+            programs[size], c_s = compiled(key, build, *call_args(padded), np.int32(size), note=note)
             compile_s += c_s
 
     def run(call):
         idx, padded = call
-        out = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], programs[len(padded)](*call_args(padded)))
+        program = programs[len(padded)]
+        out = program(*call_args(padded), np.int32(len(idx)))  # the padding's lanes are not computed
+        out = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], out)
         if on_chunk is not None:
             on_chunk(len(idx))
         return out
