@@ -131,6 +131,48 @@ def test_a_program_is_kept_per_xla_flags(tmp_path, monkeypatch):
     assert len(list((tmp_path / "brdffit-programs").glob("*.bin"))) == 2
 
 
+def test_a_run_loads_ahead_the_programs_its_kind_used_last_time(tmp_path, monkeypatch):
+    """``cache.ahead(kind)``: a block records the programs it used; the next block of that kind (here, after
+    the process's own programs are let go, as in a new process) has them loaded by its thread, so that
+    asking for one loads nothing more; and a program this process holds already is not loaded again. (One asked
+    for before the thread reached it is loaded at once, as without a block.)"""
+    import numpy as np
+
+    import concurrent.futures
+
+    from brdffit.fitting import cache
+
+    monkeypatch.setitem(cache._STATE, "dir", tmp_path)
+    monkeypatch.setattr(cache, "_CACHE", type(cache._CACHE)())
+    example = (np.arange(3.0),)
+    programs = [(("ahead_test", k), (lambda k: lambda: (lambda x: k * x + 1.0))(k)) for k in (2.0, 3.0)]
+    with cache.ahead("test kind"):
+        for key, build in programs:
+            cache.compiled(key, build, *example)
+    assert len(list((tmp_path / "brdffit-programs").glob("ahead-*.json"))) == 1
+
+    monkeypatch.setattr(cache, "_CACHE", type(cache._CACHE)())  # as a new process: nothing loaded
+
+    def refuse(*args):
+        raise AssertionError("loaded on demand, not ahead")
+
+    monkeypatch.setattr(cache, "load_or_compile", refuse)
+    loads = []
+    real_load = cache._load
+    monkeypatch.setattr(cache, "_load", lambda *a: loads.append(a[1].name) or real_load(*a))
+    with cache.ahead("test kind"):
+        concurrent.futures.wait(list(cache._AHEAD.values()), timeout=120)  # the run's first work meanwhile
+        for (key, build), k in zip(programs, (2.0, 3.0)):
+            fn, _ = cache.compiled(key, build, *example)
+            np.testing.assert_allclose(fn(*example), k * example[0] + 1.0)
+    assert len(loads) == 2
+    with cache.ahead("test kind"):  # both held in this process now: none is loaded again
+        pass
+    with cache.ahead("another kind"):  # nothing recorded for it
+        pass
+    assert len(loads) == 2
+
+
 def test_programs_on_disk_are_pruned_least_recently_used_first(tmp_path, monkeypatch):
     """Past ``PROGRAMS_MAX_BYTES`` the programs least recently written or loaded go first; the one
     just written stays (every brdffit version keys its own programs: without a limit they pile up)."""

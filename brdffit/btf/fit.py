@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import shutil
 import sys
 import time
@@ -236,6 +237,8 @@ class TileRun:
         """(tile, arrays, "this process") for every tile of ``todo``, fitted in this process: in groups
         (``tile.group_tiles``: a batch big enough for the backend's lanes), the next group read and prepared
         in a thread while the current one is solved."""
+        from ..fitting import cache
+
         job, clock = self.job, self.clock
 
         def load(group):
@@ -245,7 +248,10 @@ class TileRun:
             return loaded
 
         groups = _tile.group_tiles(self.btf, todo)
-        with ThreadPoolExecutor(1) as reader:
+        # The programs the last run of this kind used load while the first tiles are read (the BTF's own
+        # identity and shape aside: another BTF's run needs the same programs).
+        kind = {k: v for k, v in job.record.items() if k not in ("btf", "shape")}
+        with cache.ahead(f"fit_btf {json.dumps(kind, sort_keys=True)}"), ThreadPoolExecutor(1) as reader:
             ahead = reader.submit(load, groups[0]) if groups else None
             for k, group in enumerate(groups):
                 loaded = ahead.result()

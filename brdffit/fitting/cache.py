@@ -20,7 +20,10 @@ code, still serves there).
 from __future__ import annotations
 
 import collections
+import concurrent.futures
+import contextlib
 import os
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -206,6 +209,59 @@ def compiler_options() -> dict:
     return dict(_STATE["options"])
 
 
+def _program_file(key, example) -> tuple[str, Path] | None:
+    """(key text, file) of the program of ``key`` for ``example``'s shapes on disk, or None: no disk cache,
+    several processes (a loaded program would be bound to every process's devices; JAX's own cache serves
+    them), or a key of no kept kind (a model that is not the library's)."""
+    import hashlib
+
+    import jax
+
+    path = _STATE["dir"]
+    text = _key_text(key, example) if path is not None and jax.process_count() == 1 else None
+    if text is None:
+        return None
+    # XLA_FLAGS changes what XLA compiles (JAX's own cache key holds them as well).
+    flags = os.environ.get("XLA_FLAGS", "").strip()
+    text = f"{text}|{_machine()}|XLA_FLAGS={flags}|{sorted(compiler_options().items())}"
+    return text, path / "brdffit-programs" / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".bin")
+
+
+def _wrap(compiled_flat):
+    """The callable of a kept program: it takes the original arguments, the program their flat list (and
+    returns its outputs and the salt, see :func:`load_or_compile`)."""
+    import jax
+
+    return lambda *args: compiled_flat(*jax.tree_util.tree_leaves(args))[0]
+
+
+def _load(text: str, file: Path):
+    """The program kept in ``file`` under ``text``, loaded, or None (absent, damaged, or another key's)."""
+    import pickle
+
+    from jax.experimental import serialize_executable
+
+    try:
+        saved = pickle.loads(file.read_bytes())
+        if saved["key"] != text:  # a hash collision or a file of another version
+            return None
+        if saved["lapack"]:
+            # LAPACK's entry points are looked up (from SciPy) when a program calling them is lowered; a
+            # loaded program is not lowered, so look them up here (without them it would call a null pointer).
+            from jax._src.lax.linalg import initialize_lapack  # jax is pinned (pyproject)
+
+            initialize_lapack()
+        program = _wrap(serialize_executable.deserialize_and_load(saved["program"], saved["in_tree"],
+                                                                  saved["out_tree"]))
+    except Exception:  # noqa: BLE001 - a damaged or foreign file: compiled again by the caller
+        return None
+    try:  # used now: the last to be pruned (_prune)
+        os.utime(file)
+    except OSError:
+        pass
+    return program
+
+
 def load_or_compile(key, build, example):
     """Compiled ``jax.jit(build())`` for ``example``'s shapes; with the cache on, the compiled
     program itself is kept on disk, so that a second process neither traces, lowers nor compiles
@@ -223,45 +279,19 @@ def load_or_compile(key, build, example):
     import jax
     import jax.numpy as jnp
 
-    path = _STATE["dir"]
-    # Several processes (jax.distributed, fit_btf): a loaded program would be bound to every
-    # process's devices; JAX's own cache serves them.
-    text = _key_text(key, example) if path is not None and jax.process_count() == 1 else None
     options = compiler_options()
-    if text is None:
+    where = _program_file(key, example)
+    if where is None:
         return jax.jit(build()).lower(*example).compile(compiler_options=options)
-    # XLA_FLAGS changes what XLA compiles (JAX's own cache key holds them as well).
-    text = f"{text}|{_machine()}|XLA_FLAGS={os.environ.get('XLA_FLAGS', '').strip()}|{sorted(options.items())}"
-    file = path / "brdffit-programs" / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".bin")
+    text, file = where
     # The program takes the flat list of arrays (our own pytree types, such as problem.Data, are not
     # kept on disk); the returned callable takes the original arguments.
     leaves, treedef = jax.tree_util.tree_flatten(example)
-
-    def wrap(compiled_flat):
-        return lambda *args: compiled_flat(*jax.tree_util.tree_leaves(args))[0]  # [1]: the salt
-
+    program = _load(text, file) if file.exists() else None
+    if program is not None:
+        return program
     from jax.experimental import serialize_executable
 
-    if file.exists():
-        try:
-            saved = pickle.loads(file.read_bytes())
-            if saved["key"] == text:  # not a hash collision or a file of another version
-                if saved["lapack"]:
-                    # LAPACK's entry points are looked up (from SciPy) when a program calling them
-                    # is lowered; a loaded program is not lowered, so look them up here (without
-                    # them the program would call a null pointer).
-                    from jax._src.lax.linalg import initialize_lapack  # jax is pinned (pyproject)
-
-                    initialize_lapack()
-                program = wrap(serialize_executable.deserialize_and_load(saved["program"], saved["in_tree"],
-                                                                         saved["out_tree"]))
-                try:  # used now: the last to be pruned (_prune)
-                    os.utime(file)
-                except OSError:
-                    pass
-                return program
-        except Exception:  # noqa: BLE001 - a damaged or foreign file: compile again below
-            pass
     fn = build()
     _listen_for_jax_hits()  # here, its only reader: also when the folder was set without enable()
 
@@ -282,7 +312,7 @@ def load_or_compile(key, build, example):
     if from_jax:
         compiled, from_jax = compile_salted(secrets.randbits(28))
         if from_jax:
-            return wrap(compiled)
+            return _wrap(compiled)
     try:
         program, in_tree, out_tree = serialize_executable.serialize(compiled)
         # Any custom call: make sure LAPACK's entry points are set before a later process runs it
@@ -290,7 +320,7 @@ def load_or_compile(key, build, example):
         data = pickle.dumps({"key": text, "program": program, "in_tree": in_tree, "out_tree": out_tree,
                              "lapack": "custom_call_target" in compiled.as_text()})
     except Exception:  # noqa: BLE001 - not serialisable: no disk copy
-        return wrap(compiled)
+        return _wrap(compiled)
     tmp = file.with_suffix(f".tmp{os.getpid()}")
     try:
         file.parent.mkdir(parents=True, exist_ok=True)
@@ -300,7 +330,7 @@ def load_or_compile(key, build, example):
         tmp.unlink(missing_ok=True)
     else:
         _prune(file.parent, keep=file)
-    return wrap(compiled)
+    return _wrap(compiled)
 
 
 #: compiled programs of this process, by (key, argument shapes), the most recently used last
@@ -324,18 +354,89 @@ def compiled(key, build: Callable[[], Callable], *example, note: Callable[[str],
     once per machine; returns (compiled function, compile seconds this call).
 
     On disk (:func:`load_or_compile`): the compiled program itself, so that a second process
-    neither traces (nor imports optimistix), lowers nor compiles it."""
+    neither traces (nor imports optimistix), lowers nor compiles it. Loaded already when a run of its
+    kind loads its programs ahead (:func:`ahead`)."""
     full = (key, _shape_key(example))
     hit = _CACHE.get(full)
+    where = _program_file(key, example) if hit is None or _USED else None
+    for used in _USED:
+        if where is not None and where[0] not in used:
+            used[where[0]] = where[1].name
     if hit is not None:
         _CACHE.move_to_end(full)
         return hit, 0.0
     if note is not None:
         note(f"compiling: {key[0]} ({'cached on disk' if cache_enabled() else 'no disk cache'})")
     t0 = time.perf_counter()
-    fn = load_or_compile(key, build, example)
+    loading = _AHEAD.pop(where[0], None) if where is not None else None
+    # Being loaded: wait for it; not reached yet (cancelled): loaded here now, not after the others.
+    fn = loading.result() if loading is not None and not loading.cancel() else None
+    if fn is None:
+        fn = load_or_compile(key, build, example)
     dt = time.perf_counter() - t0
     _CACHE[full] = fn
+    if where is not None:
+        _TEXTS[where[0]] = full
     while len(_CACHE) > MAX_LOADED:
         _CACHE.popitem(last=False)
     return fn, dt
+
+
+# -- programs loaded ahead ------------------------------------------------------------------------------
+#: Programs being loaded ahead (:func:`ahead`), by key text: futures of the loaded programs (None: not loaded).
+_AHEAD: dict = {}
+#: The programs each :func:`ahead` block open now has used, by key text: their files' names, in order of use.
+_USED: list[dict] = []
+#: The key in ``_CACHE`` of each program loaded or compiled here, by key text (programs let go stay listed).
+_TEXTS: dict = {}
+
+
+@contextlib.contextmanager
+def ahead(kind: str):
+    """Within the block, the programs that the last run of this ``kind`` used are loaded from the disk cache
+    in a thread, in the order it used them, so that loading them overlaps what the run does first (a BTF's
+    first tiles are read meanwhile; loading a program is ~0.05-0.2 s of XLA's, without the GIL); at the end
+    the programs this run used are kept as the kind's, in ``brdffit-programs/ahead-<hash>.json``. A
+    program the run asks for before its turn came is loaded as without this; one loaded and not asked for
+    is let go at the end. With the disk cache off: nothing."""
+    import hashlib
+    import json
+
+    path = _STATE["dir"]
+    if path is None:
+        yield
+        return
+    record = path / "brdffit-programs" / f"ahead-{hashlib.sha256(kind.encode()).hexdigest()[:16]}.json"
+    try:
+        last = json.loads(record.read_text())
+    except (OSError, ValueError):
+        last = {}
+    mine = {}
+    for text in last:
+        if text not in _AHEAD and _TEXTS.get(text) not in _CACHE:  # not loading, nor loaded in this process
+            mine[text] = _AHEAD[text] = concurrent.futures.Future()
+
+    def load():
+        for text, future in mine.items():
+            if future.set_running_or_notify_cancel():
+                future.set_result(_load(text, record.parent / last[text]))
+
+    if mine:
+        threading.Thread(target=load, name="brdffit-programs-ahead", daemon=True).start()
+    used: dict = {}
+    _USED.append(used)
+    try:
+        yield
+    finally:
+        _USED.remove(used)
+        for text, future in mine.items():
+            if _AHEAD.get(text) is future:
+                del _AHEAD[text]
+                future.cancel()  # not started: not loaded; else loaded and let go
+        if used and used != last:
+            tmp = record.with_suffix(f".tmp{os.getpid()}")
+            try:
+                tmp.write_text(json.dumps(used))
+                os.replace(tmp, record)
+            except OSError:  # a read-only folder: nothing kept
+                tmp.unlink(missing_ok=True)
