@@ -395,7 +395,7 @@ _TEXTS: dict = {}
 def ahead(kind: str):
     """Within the block, the programs that the last run of this ``kind`` used are loaded from the disk cache
     in a thread, in the order it used them, so that loading them overlaps what the run does first (a BTF's
-    first tiles are read meanwhile; loading a program is ~0.05-0.2 s of XLA's, without the GIL); at the end
+    first tiles are read meanwhile; loading a program is ~0.05-0.2 s, most of it in XLA); at the end
     the programs this run used are kept as the kind's, in ``brdffit-programs/ahead-<hash>.json``. A
     program the run asks for before its turn came is loaded as without this; one loaded and not asked for
     is let go at the end. With the disk cache off: nothing."""
@@ -411,6 +411,7 @@ def ahead(kind: str):
         last = json.loads(record.read_text())
     except (OSError, ValueError):
         last = {}
+    last = last if isinstance(last, dict) else {}
     mine = {}
     for text in last:
         if text not in _AHEAD and _TEXTS.get(text) not in _CACHE:  # not loading, nor loaded in this process
@@ -419,7 +420,7 @@ def ahead(kind: str):
     def load():
         for text, future in mine.items():
             if future.set_running_or_notify_cancel():
-                future.set_result(_load(text, record.parent / last[text]))
+                future.set_result(_load(text, record.parent / Path(str(last[text])).name))
 
     if mine:
         threading.Thread(target=load, name="brdffit-programs-ahead", daemon=True).start()
