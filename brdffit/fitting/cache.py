@@ -287,7 +287,7 @@ def load_or_compile(key, build, example):
     # The program takes the flat list of arrays (our own pytree types, such as problem.Data, are not
     # kept on disk); the returned callable takes the original arguments.
     leaves, treedef = jax.tree_util.tree_flatten(example)
-    program = _load(text, file) if file.exists() else None
+    program = _load(text, file)
     if program is not None:
         return program
     from jax.experimental import serialize_executable

@@ -145,7 +145,7 @@ def _join(own: Data, shared: Data) -> Data:
     return Data(*(a if a is not None else b for a, b in zip(own, shared)))
 
 
-def map_lanes(fn, lane_args, data: Data, lanes: int, count=None):
+def map_lanes(fn, lane_args, data: Data, lanes: int, count):
     """``fn(lane_args_i, data_i)`` for every lane i (the leading axis of ``lane_args`` and of ``data``'s
     per-lane fields), ``lanes`` of them vectorised at a time; shared fields are passed whole.
 
@@ -157,7 +157,7 @@ def map_lanes(fn, lane_args, data: Data, lanes: int, count=None):
     on the program's size (a BTF's maps must not depend on how its tiles were grouped), so the loop is one
     XLA cannot see through: a trip count it knew would let it unroll a loop of one lane into its
     surroundings, and a single lane's arrays are doubled (an axis of length one is laid out otherwise);
-    either changed the last bits of a lane's result. ``count`` None: every lane."""
+    either changed the last bits of a lane's result."""
     own, shared = _split(data)
     if lanes > 1:
         return jax.lax.map(lambda x: fn(x[0], _join(x[1], shared)), (lane_args, own), batch_size=lanes)
@@ -172,8 +172,7 @@ def map_lanes(fn, lane_args, data: Data, lanes: int, count=None):
         return jax.tree_util.tree_map(lambda o, v: o.at[i].set(v), acc, fn(x[0], _join(x[1], shared)))
 
     empty = jax.tree_util.tree_map(lambda s: jnp.zeros((n, *s.shape), s.dtype), out)
-    trips = jax.lax.optimization_barrier(jnp.int32(n)) if count is None else jnp.minimum(count, n)
-    return jax.lax.fori_loop(0, trips, one, empty)
+    return jax.lax.fori_loop(0, jnp.minimum(count, n), one, empty)
 
 
 def shared_geometry(objective: Objective, data: Data):
