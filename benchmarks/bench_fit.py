@@ -23,6 +23,11 @@ to the hand-written fit is printed beside the medians'); ratios are within one r
 may be shared).
 
 ``--batch N``: ``fit_batch`` on N ggx UBO-81 texels (synthetic, 1 % noise): fits per second.
+
+``--step``: one evaluation of the normal equations as a fit runs it (ggx, cook_torrance, lambert+ggx+ggx; the
+Jacobian's rows in float32, fit_btf's, and in float64, fit's, where the switch does nothing), with the basis's
+partials materialised before the rows read them (``objective.PARTIALS_ONCE``) and without, alternating. Run it
+on one core (``taskset -c 0``), as a lane of fit_btf runs.
 """
 
 from __future__ import annotations
@@ -147,6 +152,45 @@ def step_cost(meas, model_name: str, repeat: int = 200) -> dict:
     return out
 
 
+def evaluation_cost(meas, model_name: str, jacobian: str, repeat: int = 300) -> dict:
+    """Time of one evaluation of the normal equations as a fit runs them (the direction-only terms precomputed,
+    ``jacobian`` the rows' precision: "float32" is fit_btf's), with the basis's partials materialised before the
+    rows read them (``objective.PARTIALS_ONCE``, the default on a CPU) and without: {True: s, False: s}, the best
+    of 7 runs of ``repeat``, the two alternating."""
+    from brdffit.fitting import objective
+
+    prep = prepare(meas)
+    model = resolve_model(model_name, prep.channels)
+    v = jnp.asarray(model.default_vector())
+    consts = jax.jit(lambda d: objective.fit_constants(model, "log", d, jacobian=jacobian))(prep.data)
+    args = (v, prep.data, consts.g_ref, consts.geometry)
+    programs = {}
+    for once in (True, False):
+        objective.PARTIALS_ONCE = once  # read when the program is traced
+        jax.clear_caches()
+        programs[once] = jax.jit(objective.normal_equations(model, "log", jacobian)).lower(*args).compile()
+        jax.block_until_ready(programs[once](*args))
+    objective.PARTIALS_ONCE = True
+    best = {True: float("inf"), False: float("inf")}
+    for _ in range(7):
+        for once, program in programs.items():
+            t0 = time.perf_counter()
+            for _ in range(repeat):
+                out = program(*args)
+            jax.block_until_ready(out)
+            best[once] = min(best[once], (time.perf_counter() - t0) / repeat)
+    return best
+
+
+def print_evaluation_costs() -> None:
+    meas = brdffit.load(REPO / "data" / "sample_ubo81.exr")
+    for name in ("ggx", "cook_torrance", "lambert+ggx+ggx"):
+        for jacobian in ("float32", "float64"):
+            t = evaluation_cost(meas, name, jacobian)
+            print(f"one evaluation, {name}, {jacobian} rows (data/sample_ubo81.exr): partials once "
+                  f"{t[True] * 1e6:.1f} us, per channel {t[False] * 1e6:.1f} us, x{t[False] / t[True]:.2f}", flush=True)
+
+
 def cli_times(repeat: int = 3) -> tuple[float, float]:
     """First process (empty compile cache) and the median of ``repeat`` second ones, wall seconds
     (``bench_cli``: a run that fails or writes no fit.json / fit.png raises SystemExit)."""
@@ -162,9 +206,14 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--batch", type=int, default=0, metavar="N", help="instead: fit_batch on N synthetic texels")
     ap.add_argument("--no-cli", action="store_true", help="skip the first/second process CLI timing")
+    ap.add_argument("--step", action="store_true", help="instead: one evaluation of the normal equations, timed")
     args = ap.parse_args(argv)
     if args.batch:
         return bench_batch(args.batch)
+    if args.step:
+        print(f"devices: {jax.devices()} (one thread: XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r})", flush=True)
+        print_evaluation_costs()
+        return 0
     print(f"devices: {jax.devices()}, CPU cores: {os.cpu_count()} (ratios are within this run)", flush=True)
     rows = []
     for path in data_files():

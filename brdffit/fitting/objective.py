@@ -117,6 +117,11 @@ def basis_fn(model: Model):
     return basis
 
 
+#: Materialise the basis's partials before the Jacobian's rows read them, on a CPU (see ``structured`` below); a
+#: switch for the benchmark that measures it (``benchmarks/bench_fit.py --step``), read when a program is traced.
+PARTIALS_ONCE = True
+
+
 @functools.lru_cache(maxsize=None)
 def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
     """(v (P,), data, g_ref=None, geometry=None) -> (r.r, J^T r (P,), J^T J (P, P)), by the
@@ -173,10 +178,13 @@ def normal_equations(model: Model, loss: str, jacobian: str = "float64"):
         # Left to itself XLA copies a chain of cheap operations into every loop that reads it, and
         # recomputed the lobe inside each Jacobian row and sum. It does not copy a division: each is
         # divided by a one it cannot see (an optimization_barrier keeps it from folding x / 1), which
-        # is exact. optimization_barriers on the results themselves, which stood here, did not stop the
-        # copying (the compiled program has none left). Measured on ggx/UBO-81 (one core, the fit's
-        # compile options), with the basis's samples last (basis_fn): 0.41 -> 0.37 ms per evaluation.
+        # is exact. Measured on ggx/UBO-81 (one core, the fit's compile options): 0.41 -> 0.37 ms.
         one = jax.lax.optimization_barrier(jnp.ones((), F.dtype))
+        if nonlin and mixed and PARTIALS_ONCE and jax.default_backend() == "cpu":
+            # XLA fused the channel-free partials' whole expression into each (C, N) float32 row, once per channel; it
+            # does not fuse across a conditional. One evaluation (one core): ggx 312 -> 281 us, lambert+ggx+ggx 875 ->
+            # 653 us; float64 rows gain nothing. An accelerator is left to fuse (a conditional there waits for the host).
+            dF = jax.lax.cond(one > 0, lambda a: a, jnp.zeros_like, dF)
         Ft = F / one
         dFt = dF / one.astype(dF.dtype) if nonlin else None
         B, B0 = Ft[:n_lin] - Ft[n_lin:], Ft[n_lin]
@@ -282,13 +290,6 @@ def _split_vector(model: Model):
     return split
 
 
-def _from_basis(F, lam, n_lin: int):
-    """f (N, C) = B_0 + B lam from the basis F (n_lin + 1, N) of :func:`basis_fn` and the linear
-    parameters lam (n_lin, C); also returns B (n_lin, N)."""
-    B = F[:n_lin] - F[n_lin:]
-    return (F[n_lin][None] + lam.T @ B).T, B
-
-
 def basis_and_partials(basis, n_nl: int):
     """(theta, wi, wo) -> (F (n_lin + 1, N), dF (n_nl, n_lin + 1, N) or None): the basis and its
     partials in theta (a vmap of JVPs, laid out for the products of the step)."""
@@ -380,7 +381,7 @@ def model_values(model: Model):
         if isinstance(geometry, MixedTerms):
             geometry = geometry.exact
         F, _ = geometry_split(model, wi.shape[0], str(wi.dtype)).finish(theta, geometry)  # partials: dead code
-        return _from_basis(F, lam, n_lin)[0]
+        return (F[n_lin][None] + lam.T @ (F[:n_lin] - F[n_lin:])).T  # f = B_0 + B lam, (N, C)
 
     return values
 
