@@ -43,8 +43,8 @@ GIVEN_START_FACTOR = 1.1
 UNREACHED_REL_RMSE = 0.5
 
 
-def _quiet(_message: str) -> None:
-    pass
+def quiet(_message: str) -> None:
+    """A ``note`` that says nothing (the default where a caller does not listen)."""
 
 
 class Solved(NamedTuple):
@@ -70,7 +70,7 @@ def _best_of(loss: np.ndarray, n: int, k: int) -> np.ndarray:
 
 def solve(space: ParameterSpace, options: FitOptions, data: Data, *, k: int, unit: float = 1.0,
           fits: np.ndarray | None = None, starts: np.ndarray | None = None, grid: bool = True, near: bool = False,
-          results: bool = True, check_given: bool = False, note: Callable[[str], None] = _quiet,
+          results: bool = True, check_given: bool = False, note: Callable[[str], None] = quiet,
           progress=None) -> Solved:
     """Fit the fits ``fits`` (rows of the per-fit fields; default: all) of ``data`` (``Data``: ref and floor
     with a leading fit axis (n, ...), the other fields with one too or shared by every fit) in ``space``;

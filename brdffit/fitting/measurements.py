@@ -19,7 +19,7 @@ from .._fit_defaults import STATUS_TEXT
 from ..errors import UsageError
 from ..measurement import Measurement
 from ..models.base import Model
-from .driver import _quiet, solve
+from .driver import quiet, solve
 from .options import FitOptions
 from .problem import Prepared, data_unit, prepare, resolve_model, stack_data
 from .space import ParameterSpace, fit_warnings, sample_spacing
@@ -30,7 +30,7 @@ STDERR_MAX_COND = 1e12
 
 def fit_measurements(measurements: Sequence[Measurement], model: str | Model, options: FitOptions, *,
                      result_type: type, weights=None, starts=None, grid: bool = True, check_given: bool = False,
-                     note: Callable[[str], None] = _quiet, progress=None, who: str = "fit") -> list:
+                     note: Callable[[str], None] = quiet, progress=None, who: str = "fit") -> list:
     """Fit ``model`` to each measurement (same samples and channels) with ``options``; one
     ``result_type`` (:class:`brdffit.FitResult`) each. ``starts``: one start per measurement, each
     "defaults", a params dict or a flat vector (P,) in the table's unit (``ParameterSpace.start``), or None;
