@@ -250,13 +250,6 @@ class Stages:
         self.bounds = (space.lo, space.hi, np.asarray(space.free, bool))
         self.seconds = {"compile": 0.0, "run": 0.0, "init": 0.0} if seconds is None else seconds
 
-    def _spent(self, compile_s: float, run_s: float, *also: str) -> None:
-        """A stage's seconds on the clock: "compile", "run", and their sum on each key of ``also``."""
-        self.seconds["compile"] += compile_s
-        self.seconds["run"] += run_s
-        for key in also:
-            self.seconds[key] += compile_s + run_s
-
     @functools.cached_property
     def grid(self) -> np.ndarray:
         """The default grid of starts of this model and space (``init.cached_grid``: built once per model and
@@ -282,7 +275,9 @@ class Stages:
         key = (self.objective, k, grid, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("start", *key), lambda: start_stage(*key), lane_args, self.data, fits,
                                   (points, lo, hi, free, self.space.anchor, subset), self.plan, note=self.note)
-        self._spent(c_s, r_s, "init")
+        self.seconds["compile"] += c_s
+        self.seconds["run"] += r_s
+        self.seconds["init"] += c_s + r_s
         return out[0]
 
     def solve(self, v0: np.ndarray, fits: np.ndarray, progress=None, damping=START_DAMPING) -> Rounds:
@@ -295,12 +290,14 @@ class Stages:
 
             r = solve_lanes(self.objective, v0, self.data, fits, self.bounds, rtol=o.rtol, atol=o.atol,
                             max_steps=o.max_steps, jac=o.scipy_jac, progress=progress)
-        self._spent(r.compile_s, r.run_s)
+        self.seconds["compile"] += r.compile_s
+        self.seconds["run"] += r.run_s
         return r
 
     def finish(self, v: np.ndarray, fits: np.ndarray, metrics: bool, jtj: bool) -> dict:
         key = (self.objective, metrics, jtj, self.plan.lanes)
         out, c_s, r_s = run_stage(_key("finish", *key), lambda: finish_stage(*key), v, self.data, fits, (), self.plan,
                                   note=self.note)
-        self._spent(c_s, r_s)
+        self.seconds["compile"] += c_s
+        self.seconds["run"] += r_s
         return out
